@@ -1,0 +1,35 @@
+"""marl-cover: multi-robot coverage and exploration on spatial graphs.
+
+The front door is :func:`parallel_env` (PettingZoo ``ParallelEnv``) and :func:`env` (AEC).
+Importing this package needs only numpy, scipy, gymnasium and pettingzoo.
+"""
+
+from marl_cover.city import CityConfig, generate_city
+from marl_cover.collisions import resolve_collisions
+from marl_cover.config import CoverageConfig
+from marl_cover.env import CoverageEnv, CoverageSnapshot, env, parallel_env
+from marl_cover.graph import SpatialGraph
+from marl_cover.maps import graph_from_occupancy, load_occupancy, paper_graph, sample_window
+from marl_cover.registration import ENV_IDS, register_envs
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "ENV_IDS",
+    "CityConfig",
+    "CoverageConfig",
+    "CoverageEnv",
+    "CoverageSnapshot",
+    "SpatialGraph",
+    "env",
+    "generate_city",
+    "graph_from_occupancy",
+    "load_occupancy",
+    "paper_graph",
+    "parallel_env",
+    "register_envs",
+    "resolve_collisions",
+    "sample_window",
+]
+
+register_envs()

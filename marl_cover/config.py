@@ -1,0 +1,114 @@
+"""Typed, validated configuration of the coverage environment."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any, TypeVar
+
+from marl_cover.graph import SpatialGraph
+
+#: Named maps: a procedural city (new each reset), windows of the paper's map (new each reset),
+#: the paper's 1266-waypoint graph, and its 5659-waypoint graph.
+MAP_PRESETS = ("city", "paper", "paper_full", "paper_large")
+INVALID_ACTION_MODES = ("noop", "raise")
+RENDER_MODES = ("human", "rgb_array")
+
+T = TypeVar("T")
+
+
+def config_from_dict(cls: type[T], values: dict[str, Any]) -> T:
+    """Builds dataclass ``cls`` from ``values``; an unknown key is an error that names it.
+
+    Raises:
+        TypeError: a key is not a field of ``cls``.
+    """
+    names = {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
+    unknown = sorted(set(values) - names)
+    if unknown:
+        raise TypeError(
+            f"unknown {cls.__name__} key(s) {unknown}; valid keys are {sorted(names)}"
+        )
+    return cls(**values)
+
+
+@dataclass(frozen=True)
+class CoverageConfig:
+    """Configuration of :class:`marl_cover.env.CoverageEnv` (defaults: the paper's setting).
+
+    Attributes:
+        num_robots: Team size.
+        max_steps: Actions per episode, T (the paper's code gave T - 1; we give T).
+        hops: Radius K of each robot's ego-graph.
+        interest_fraction: Fraction of the waypoints drawn as points of interest at each reset.
+        start_density: Robots start on distinct waypoints of a breadth-first ball of at least
+            ``start_density * num_robots`` waypoints around a random waypoint.
+        allow_swaps: Whether two robots may exchange waypoints along one edge in one step.
+        invalid_action: What a masked-out action does: ``"noop"`` (the robot stays and its
+            ``infos["invalid_action"]`` is 1) or ``"raise"`` (``ValueError`` naming the robot).
+        map: ``"city"``, ``"paper"``, ``"paper_full"``, ``"paper_large"``, or a path to an
+            occupancy grid (``.npy`` or an image).
+        city_size: Waypoints of each procedural city (``map="city"``).
+        map_perimeter: For a grid file: keep free cells within this many cells of an obstacle
+            (``None``: every free cell).
+        map_cell_size: For a grid file: cell size in metres.
+        window_fraction: For a grid file: draw a random window of this fraction of the bounding
+            box per axis at each reset (``None``: the whole map).
+        min_window_nodes: Smallest window accepted, in waypoints.
+        graph: A ready-made map; overrides ``map``.
+        render_mode: ``None``, ``"human"`` or ``"rgb_array"``.
+    """
+
+    num_robots: int = 4
+    max_steps: int = 50
+    hops: int = 19
+    interest_fraction: float = 0.5
+    start_density: int = 5
+    allow_swaps: bool = True
+    invalid_action: str = "noop"
+    map: str = "city"
+    city_size: int = 228
+    map_perimeter: float | None = None
+    map_cell_size: float = 5.0
+    window_fraction: float | None = None
+    min_window_nodes: int = 200
+    graph: SpatialGraph | None = field(default=None, repr=False)
+    render_mode: str | None = None
+
+    def __post_init__(self) -> None:
+        checks = [
+            (self.num_robots >= 1, f"num_robots must be >= 1, got {self.num_robots}"),
+            (self.max_steps >= 1, f"max_steps must be >= 1, got {self.max_steps}"),
+            (self.hops >= 1, f"hops must be >= 1, got {self.hops}"),
+            (
+                0.0 <= self.interest_fraction <= 1.0,
+                f"interest_fraction must be in [0, 1], got {self.interest_fraction}",
+            ),
+            (self.start_density >= 1, f"start_density must be >= 1, got {self.start_density}"),
+            (
+                self.invalid_action in INVALID_ACTION_MODES,
+                f"invalid_action must be one of {INVALID_ACTION_MODES}, "
+                f"got {self.invalid_action!r}",
+            ),
+            (self.city_size >= 1, f"city_size must be >= 1, got {self.city_size}"),
+            (
+                self.window_fraction is None or 0.0 < self.window_fraction <= 1.0,
+                f"window_fraction must be in (0, 1], got {self.window_fraction}",
+            ),
+            (
+                self.render_mode is None or self.render_mode in RENDER_MODES,
+                f"render_mode must be None or one of {RENDER_MODES}, got {self.render_mode!r}",
+            ),
+            (
+                self.graph is None or isinstance(self.graph, SpatialGraph),
+                f"graph must be a SpatialGraph, got {type(self.graph).__name__}",
+            ),
+        ]
+        for ok, message in checks:
+            if not ok:
+                raise ValueError(message)
+
+    @classmethod
+    def from_dict(cls, values: dict[str, Any]) -> CoverageConfig:
+        """See :func:`config_from_dict`."""
+        return config_from_dict(cls, values)

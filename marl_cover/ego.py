@@ -1,0 +1,312 @@
+"""Graph observations: each robot's K-hop ego-subgraph, and the whole graph for ``state()``.
+
+The observed graph has two kinds of nodes, robots and waypoints. Waypoints are linked along
+the lattice; each robot is linked, in both directions, to the waypoints it can move to: its own
+waypoint (the stay action) and its neighbours. A robot's ego-graph is the subgraph induced by
+the nodes within ``hops`` hops of it, so a ``hops``-layer message-passing network gives the same
+output at the ego robot on its ego-graph as on the whole graph. Robot nodes never shorten a
+path between waypoints, so the ego-graph holds exactly the waypoints within ``hops`` lattice hops
+of the robot's waypoint, and the other robots standing on them.
+
+Padded layout of one ego-graph (``M`` nodes, ``E`` edges, the last node ``M - 1`` is a padding
+*sink* that no real edge touches; padded edges run sink -> sink, so even a consumer that ignores
+the masks cannot leak padding into real nodes):
+
+- node 0: the ego robot; nodes ``1..B``: the ``B`` waypoints of the ball, in increasing map
+  index; then the other robots in the ball, in robot order; then padding.
+- edges ``[0, 5)``: action edge of slot ``k`` (``target -> ego``), padding where the slot has no
+  waypoint; edges ``[5, 10)``: the same edges reversed; then waypoint-waypoint edges; then the
+  edges of the other robots (``target -> robot``, ``robot -> target`` pairs); then padding.
+
+The state uses the same encoding with robots ``0..R-1`` first, then every waypoint, and the
+action edges of robot ``r`` at ``5 r + k`` (in) and ``5 R + 5 r + k`` (out).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from gymnasium import spaces
+
+from marl_cover.graph import SpatialGraph
+
+#: Columns of the node feature matrix.
+NODE_FEATURES = ("is_robot", "is_waypoint", "is_interest", "is_frontier")
+NUM_NODE_FEATURES = len(NODE_FEATURES)
+#: Action slots: 0 = stay, then east, north, west, south.
+NUM_ACTIONS = 5
+#: Edges reserved at the head of an ego-graph for the ego robot's action edges, both ways.
+NUM_EGO_ACTION_EDGES = 2 * NUM_ACTIONS
+ROBOT_FEATURE = np.array([1.0, 0.0, 0.0, 0.0], dtype=np.float32)
+
+
+def lattice_ball_size(hops: int) -> int:
+    """Most lattice points within ``hops`` steps of a point of the 4-connected square lattice."""
+    return 2 * hops * hops + 2 * hops + 1
+
+
+@dataclass(frozen=True)
+class PaddedShape:
+    """Fixed padded sizes of a graph observation (``max_nodes`` includes the padding sink)."""
+
+    max_nodes: int
+    max_edges: int
+
+
+def ego_shape(max_waypoints: int, num_robots: int, hops: int, lattice: bool) -> PaddedShape:
+    """Padded sizes that hold any ego-graph.
+
+    Args:
+        max_waypoints: Most waypoints any map of the environment can have.
+        num_robots: Team size.
+        hops: Radius of the ego-graph.
+        lattice: Whether maps are square lattices (bounds a ball by :func:`lattice_ball_size`).
+    """
+    ball = min(max_waypoints, lattice_ball_size(hops)) if lattice else max_waypoints
+    return PaddedShape(
+        max_nodes=num_robots + ball + 1,
+        max_edges=4 * ball + 2 * NUM_ACTIONS * num_robots,
+    )
+
+
+def state_shape(max_waypoints: int, max_waypoint_edges: int, num_robots: int) -> PaddedShape:
+    """Padded sizes of the whole-graph state."""
+    return PaddedShape(
+        max_nodes=num_robots + max_waypoints + 1,
+        max_edges=max_waypoint_edges + 2 * NUM_ACTIONS * num_robots,
+    )
+
+
+def graph_space(shape: PaddedShape, extra: dict[str, spaces.Space] | None = None) -> spaces.Dict:
+    """The ``gymnasium`` space of a padded graph observation (see the env docstring)."""
+    m, e = shape.max_nodes, shape.max_edges
+    fields: dict[str, spaces.Space] = {
+        "nodes": spaces.Box(0.0, 1.0, (m, NUM_NODE_FEATURES), np.float32),
+        "node_pos": spaces.Box(-np.inf, np.inf, (m, 2), np.float32),
+        "node_mask": spaces.Box(0, 1, (m,), np.bool_),
+        "edge_index": spaces.Box(0, m - 1, (2, e), np.int64),
+        "edge_attr": spaces.Box(0.0, np.inf, (e, 1), np.float32),
+        "edge_mask": spaces.Box(0, 1, (e,), np.bool_),
+    }
+    fields.update(extra or {})
+    return spaces.Dict(fields)
+
+
+def action_targets(graph: SpatialGraph, robot_node: np.ndarray) -> np.ndarray:
+    """Waypoint reached by each action slot, ``(num_robots, 5)`` int64, ``-1`` if none."""
+    return np.concatenate([robot_node[:, None], graph.neighbors[robot_node]], axis=1)
+
+
+def _action_distances(graph: SpatialGraph, robot_node: np.ndarray) -> np.ndarray:
+    """Edge feature of each action edge, ``(num_robots, 5)`` float32: 0 for stay."""
+    zeros = np.zeros((len(robot_node), 1), dtype=np.float32)
+    return np.concatenate([zeros, graph.neighbor_distances[robot_node]], axis=1)
+
+
+def build_ego_graphs(
+    graph: SpatialGraph,
+    robot_node: np.ndarray,
+    waypoint_features: np.ndarray,
+    hops: int,
+    shape: PaddedShape,
+) -> dict[str, np.ndarray]:
+    """Every robot's padded ego-graph, batched over robots.
+
+    Args:
+        graph: The map.
+        robot_node: Waypoint of each robot, ``(R,)`` int64, pairwise distinct.
+        waypoint_features: ``(num_nodes, 4)`` float32 features of the waypoints, C-contiguous.
+        hops: Radius of the ego-graphs.
+        shape: Padded sizes (from :func:`ego_shape`).
+
+    Returns:
+        Freshly allocated arrays with a leading robot axis: ``nodes (R, M, 4)``,
+        ``node_pos (R, M, 2)`` (cells, relative to the ego robot), ``node_mask (R, M)``,
+        ``edge_index (R, 2, E)``, ``edge_attr (R, E, 1)``, ``edge_mask (R, E)``,
+        ``action_mask (R, 5)`` int8.
+    """
+    # Rows of features and positions move as single complex numbers (one 16- or 8-byte item),
+    # and every scatter goes through a flat index: numpy's multi-axis fancy indexing is several
+    # times slower at these sizes.
+    num_robots, num_nodes = len(robot_node), graph.num_nodes
+    m, e = shape.max_nodes, shape.max_edges
+    sink = m - 1
+    robots = np.arange(num_robots)
+
+    in_ball = graph.hop_distances(robot_node, limit=hops) <= hops  # (R, N)
+    local = np.cumsum(in_ball, axis=1).ravel()  # (R * N,); local id of a ball waypoint, 1-based
+    flat = np.flatnonzero(in_ball)  # (P,) (robot, waypoint) pairs, sorted by robot
+    r_idx, w_idx = np.divmod(flat, num_nodes)
+    w_local = local[flat]  # (P,)
+    num_ball = local[robots * num_nodes + num_nodes - 1]  # (R,)
+
+    others = in_ball[:, robot_node]  # (R, R): robot j stands in robot i's ball
+    others[robots, robots] = False
+    if hops < 2:  # another robot is at least two hops away (robot -> waypoint -> robot)
+        others[:] = False
+    other_local = (num_ball[:, None] + np.cumsum(others, axis=1)).ravel()  # valid where others
+    pair = np.flatnonzero(others)  # (Q,) (ego, other) pairs, sorted by ego robot
+    oi, oj = np.divmod(pair, num_robots)
+    o_local = other_local[pair]  # (Q,)
+    count = 1 + num_ball + others.sum(axis=1)
+    if count.max(initial=0) > sink:
+        raise RuntimeError(f"an ego-graph has {count.max()} nodes, above the bound {sink}")
+
+    # ---- nodes
+    robot_row = ROBOT_FEATURE.view(np.complex128)[0]
+    nodes = np.zeros((num_robots, m, NUM_NODE_FEATURES), dtype=np.float32)
+    nodes_flat = nodes.view(np.complex128).reshape(-1)  # one item per node
+    nodes_flat[robots * m] = robot_row
+    nodes_flat[r_idx * m + w_local] = waypoint_features.view(np.complex128).reshape(-1)[w_idx]
+    nodes_flat[oi * m + o_local] = robot_row
+    cells = graph.complex_cells  # (N,) complex64: x + iy in cells
+    node_pos = np.zeros((num_robots, m, 2), dtype=np.float32)
+    pos_flat = node_pos.view(np.complex64).reshape(-1)
+    robot_cells = cells[robot_node]
+    pos_flat[r_idx * m + w_local] = cells[w_idx] - robot_cells[r_idx]
+    pos_flat[oi * m + o_local] = robot_cells[oj] - robot_cells[oi]
+    node_mask = np.arange(m)[None, :] < count[:, None]
+
+    edge_index = np.full((num_robots, 2, e), sink, dtype=np.int64)
+    index_flat = edge_index.reshape(-1)
+    edge_attr = np.zeros((num_robots, e, 1), dtype=np.float32)
+    attr_flat = edge_attr.reshape(-1)
+    edge_mask = np.zeros((num_robots, e), dtype=bool)
+    mask_flat = edge_mask.reshape(-1)
+
+    def put_edges(robot: np.ndarray, slot: np.ndarray, send, receive, attr) -> None:  # noqa: ANN001
+        index_flat[robot * (2 * e) + slot] = send
+        index_flat[robot * (2 * e) + e + slot] = receive
+        attr_flat[robot * e + slot] = attr
+        mask_flat[robot * e + slot] = True
+
+    # ---- the ego robot's action edges, at fixed positions (padding where a slot is empty)
+    targets = action_targets(graph, robot_node)  # (R, 5)
+    action_mask = targets >= 0
+    target_local = np.where(action_mask, local[robots[:, None] * num_nodes + targets], sink)
+    ego = np.where(action_mask, 0, sink)
+    edge_index[:, 0, :NUM_ACTIONS] = target_local
+    edge_index[:, 1, :NUM_ACTIONS] = ego
+    edge_index[:, 0, NUM_ACTIONS:NUM_EGO_ACTION_EDGES] = ego
+    edge_index[:, 1, NUM_ACTIONS:NUM_EGO_ACTION_EDGES] = target_local
+    distances = _action_distances(graph, robot_node)  # (R, 5)
+    edge_attr[:, :NUM_ACTIONS, 0] = distances
+    edge_attr[:, NUM_ACTIONS:NUM_EGO_ACTION_EDGES, 0] = distances
+    edge_mask[:, :NUM_ACTIONS] = action_mask
+    edge_mask[:, NUM_ACTIONS:NUM_EGO_ACTION_EDGES] = action_mask
+
+    # ---- waypoint-waypoint edges inside each ball
+    nbr = graph.neighbors[w_idx]  # (P, 4)
+    ok = nbr >= 0
+    nbr_flat = (r_idx * num_nodes)[:, None] + nbr  # (P, 4)
+    ok &= in_ball.reshape(-1)[np.where(ok, nbr_flat, 0)]
+    hit = np.flatnonzero(ok)
+    row = hit >> 2  # the (robot, waypoint) pair of each edge; 4 slots per row
+    er = r_idx[row]
+    num_ww = np.bincount(er, minlength=num_robots)
+    slot = NUM_EGO_ACTION_EDGES + np.arange(len(er)) - (np.cumsum(num_ww) - num_ww)[er]
+    put_edges(
+        er, slot, w_local[row], local[nbr_flat.reshape(-1)[hit]],
+        graph.neighbor_distances.reshape(-1)[(w_idx[row] << 2) + (hit & 3)],
+    )
+
+    # ---- the other robots' action edges that stay inside the ball, in (in, out) pairs
+    other_targets = targets[oj]  # (Q, 5)
+    ok = other_targets >= 0
+    target_flat = (oi * num_nodes)[:, None] + other_targets
+    ok &= in_ball.reshape(-1)[np.where(ok, target_flat, 0)]
+    hit = np.flatnonzero(ok)
+    row = hit // NUM_ACTIONS
+    er = oi[row]
+    num_other = np.bincount(er, minlength=num_robots)
+    rank = np.arange(len(er)) - (np.cumsum(num_other) - num_other)[er]
+    slot = NUM_EGO_ACTION_EDGES + num_ww[er] + 2 * rank
+    target_ids = local[target_flat.reshape(-1)[hit]]
+    robot_ids = o_local[row]
+    pair_distances = distances[oj[row], hit % NUM_ACTIONS]
+    put_edges(er, slot, target_ids, robot_ids, pair_distances)
+    put_edges(er, slot + 1, robot_ids, target_ids, pair_distances)
+    if num_robots and (NUM_EGO_ACTION_EDGES + num_ww + 2 * num_other).max() > e:
+        raise RuntimeError("an ego-graph has more edges than its padded bound")
+
+    return {
+        "nodes": nodes,
+        "node_pos": node_pos,
+        "node_mask": node_mask,
+        "edge_index": edge_index,
+        "edge_attr": edge_attr,
+        "edge_mask": edge_mask,
+        "action_mask": action_mask.astype(np.int8),
+    }
+
+
+class StateBuilder:
+    """Builds the whole-graph state of one map; the waypoint part is prepared once per map."""
+
+    def __init__(self, graph: SpatialGraph, num_robots: int, shape: PaddedShape) -> None:
+        self.graph = graph
+        self.num_robots = num_robots
+        self.shape = shape
+        m, e = shape.max_nodes, shape.max_edges
+        n, r = graph.num_nodes, num_robots
+        if r + n >= m or graph.num_edges + 2 * NUM_ACTIONS * r > e:
+            raise ValueError(
+                f"a map of {n} waypoints and {graph.num_edges} edges does not fit the state "
+                f"bounds of {m - 1 - r} waypoints and {e - 2 * NUM_ACTIONS * r} edges"
+            )
+        sink = m - 1
+        first = 2 * NUM_ACTIONS * r
+        self._edge_index = np.full((2, e), sink, dtype=np.int64)
+        self._edge_index[:, first : first + graph.num_edges] = graph.edge_index + r
+        self._edge_attr = np.zeros((e, 1), dtype=np.float32)
+        valid = graph.neighbors >= 0
+        self._edge_attr[first : first + graph.num_edges, 0] = graph.neighbor_distances[valid]
+        self._edge_mask = np.zeros(e, dtype=bool)
+        self._edge_mask[first : first + graph.num_edges] = True
+        self._node_pos = np.zeros((m, 2), dtype=np.float32)
+        self._node_pos[r : r + n] = graph.positions / graph.cell_size
+        self._node_mask = np.arange(m) < r + n
+
+    def build(self, robot_node: np.ndarray, waypoint_features: np.ndarray) -> dict[str, np.ndarray]:
+        """The state for robots on ``robot_node`` ``(R,)`` and waypoint features ``(N, 4)``.
+
+        Returns:
+            Fresh arrays: ``nodes (M, 4)``, ``node_pos (M, 2)`` (cells, map frame),
+            ``node_mask (M,)``, ``edge_index (2, E)``, ``edge_attr (E, 1)``, ``edge_mask (E,)``,
+            ``action_mask (R, 5)`` int8, ``robot_nodes (R,)`` (the node of each robot).
+        """
+        graph, r = self.graph, self.num_robots
+        m = self.shape.max_nodes
+        sink = m - 1
+        nodes = np.zeros((m, NUM_NODE_FEATURES), dtype=np.float32)
+        nodes[:r] = ROBOT_FEATURE
+        nodes[r : r + graph.num_nodes] = waypoint_features
+        node_pos = self._node_pos.copy()
+        node_pos[:r] = node_pos[r + robot_node]
+
+        targets = action_targets(graph, robot_node)  # (R, 5)
+        action_mask = targets >= 0
+        target_ids = np.where(action_mask, targets + r, sink).ravel()
+        robot_ids = np.where(action_mask, np.arange(r)[:, None], sink).ravel()
+        edge_index = self._edge_index.copy()
+        k = NUM_ACTIONS * r
+        edge_index[0, :k], edge_index[1, :k] = target_ids, robot_ids
+        edge_index[0, k : 2 * k], edge_index[1, k : 2 * k] = robot_ids, target_ids
+        edge_attr = self._edge_attr.copy()
+        distances = _action_distances(graph, robot_node).ravel()
+        edge_attr[:k, 0] = distances
+        edge_attr[k : 2 * k, 0] = distances
+        edge_mask = self._edge_mask.copy()
+        edge_mask[:k] = action_mask.ravel()
+        edge_mask[k : 2 * k] = action_mask.ravel()
+        return {
+            "nodes": nodes,
+            "node_pos": node_pos,
+            "node_mask": self._node_mask.copy(),
+            "edge_index": edge_index,
+            "edge_attr": edge_attr,
+            "edge_mask": edge_mask,
+            "action_mask": action_mask.astype(np.int8),
+            "robot_nodes": np.arange(r, dtype=np.int64),
+        }

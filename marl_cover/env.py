@@ -1,0 +1,457 @@
+"""Multi-robot coverage on a spatial graph, as a PettingZoo parallel environment.
+
+A team of robots moves on a lattice of waypoints (5 m apart, 4-connected). Half of the
+waypoints, drawn at each reset, are points of interest; the team earns +1 for each point of
+interest that a robot visits for the first time. Each robot sees only its K-hop ego-graph.
+
+========================  ==================================================================
+Agents                    ``robot_0 ... robot_{num_robots-1}``
+Action space              ``Discrete(5)``: 0 stay, 1 east, 2 north, 3 west, 4 south
+Observation space         ``Dict`` of padded graph arrays (table below)
+State space               ``Dict``: the whole graph in the same encoding, plus ``robot_nodes``
+Reward                    Team reward: points of interest newly visited this step (all robots
+                          get it); each robot's own count is ``infos[agent]["new_interest"]``
+Termination               Every point of interest has been visited
+Truncation                After ``max_steps`` actions (default 50)
+Import                    ``marl_cover.parallel_env(**config)``, ``marl_cover.env(**config)``
+Registered ids            ``marl_cover/Coverage-v0`` (parallel and AEC registries)
+========================  ==================================================================
+
+Observation of one robot (``M`` = padded nodes, ``E`` = padded edges, fixed per environment;
+the last node ``M - 1`` is a padding sink, and padded edges run sink -> sink):
+
+==============  ===============  =======  ==================================================
+key             shape            dtype    meaning
+==============  ===============  =======  ==================================================
+``nodes``       ``(M, 4)``       float32  ``[is_robot, is_waypoint, is_interest,
+                                          is_frontier]``; ``is_interest`` = unvisited point
+                                          of interest; ``is_frontier`` is 0 in coverage.
+                                          Node 0 is the ego robot (no ego-only feature)
+``node_pos``    ``(M, 2)``       float32  position in cells relative to the ego robot
+                                          (+x east, +y north); 0 for padding
+``node_mask``   ``(M,)``         bool     real nodes (a prefix)
+``edge_index``  ``(2, E)``       int64    ``[sender; receiver]`` local node indices
+``edge_attr``   ``(E, 1)``       float32  edge length in cells (0 for a robot's stay edge)
+``edge_mask``   ``(E,)``         bool     real edges; edges ``k`` and ``5 + k`` are the
+                                          ego robot's action edge of slot ``k`` (target ->
+                                          robot, robot -> target), real iff the slot exists
+``action_mask`` ``(5,)``         int8     1 where the action leads to a waypoint
+==============  ===============  =======  ==================================================
+
+The ego-graph holds every node within ``hops`` hops of the ego robot in the graph of robots
+and waypoints (each robot linked to its own waypoint and to its neighbours) and every edge
+among them; see :mod:`marl_cover.ego`. ``state()`` has the same keys with robots as nodes
+``0..R-1``, waypoints after them, ``node_pos`` in the map frame, ``action_mask (R, 5)`` and
+``robot_nodes (R,)``.
+
+Arguments: the fields of :class:`marl_cover.config.CoverageConfig`; ``max_cycles`` is accepted
+as PettingZoo's name for ``max_steps``.
+
+Deviations from the paper's code (Tolstaya et al.; see ``shared/docs/reference_impl.md``):
+
+- An episode has exactly ``max_steps`` actions (the paper's code gave ``max_steps - 1``).
+- Actions are geometric slots with an explicit stay action, available at every waypoint; the
+  paper used the k-th neighbour by node index, padded with repeated stays, so a robot could not
+  wait at a waypoint of degree 4.
+- The collision resolver never lets two robots share a waypoint (the paper's could); see
+  :mod:`marl_cover.collisions`. Swaps are allowed by default, as in the paper.
+- Each robot observes its K-hop ego-graph instead of the whole map; robots are also linked to
+  their own waypoint (the stay edge). Edge features are lengths in cells for every edge.
+- Every random choice comes from one ``numpy`` generator seeded by ``reset(seed=...)``.
+- A masked-out action is a no-op counted in ``infos`` (``invalid_action="raise"`` makes it an
+  error). Start waypoints are marked visited at reset without reward, as in the paper.
+
+Version history: v0, first release.
+"""
+
+from __future__ import annotations
+
+import functools
+import warnings
+from dataclasses import dataclass
+from typing import Any
+
+import gymnasium
+import numpy as np
+from pettingzoo import ParallelEnv
+from pettingzoo.utils.conversions import parallel_to_aec
+
+from marl_cover.collisions import resolve_collisions
+from marl_cover.config import CoverageConfig
+from marl_cover.ego import (
+    NUM_ACTIONS,
+    NUM_NODE_FEATURES,
+    StateBuilder,
+    action_targets,
+    build_ego_graphs,
+    ego_shape,
+    graph_space,
+    state_shape,
+)
+from marl_cover.graph import SpatialGraph
+from marl_cover.sources import make_map_source
+
+#: Options ``reset`` understands.
+RESET_OPTIONS = ("robot_nodes", "interest_nodes")
+
+
+@dataclass(frozen=True)
+class CoverageSnapshot:
+    """A read-only copy of the environment's state, for planners and experts.
+
+    Attributes:
+        graph: The map of this episode.
+        robot_node: Waypoint of each robot, ``(num_robots,)`` int64.
+        interest: Points of interest of this episode, ``(num_nodes,)`` bool.
+        visited: Waypoints visited so far, ``(num_nodes,)`` bool.
+        num_steps: Actions taken so far.
+        max_steps: Actions per episode.
+        hops: Ego-graph radius.
+    """
+
+    graph: SpatialGraph
+    robot_node: np.ndarray
+    interest: np.ndarray
+    visited: np.ndarray
+    num_steps: int
+    max_steps: int
+    hops: int
+
+    @property
+    def unvisited_interest(self) -> np.ndarray:
+        """Points of interest not visited yet, ``(num_nodes,)`` bool."""
+        return self.interest & ~self.visited
+
+
+class CoverageEnv(ParallelEnv):
+    """The coverage environment; see the module docstring for its spaces and rules."""
+
+    metadata = {
+        "name": "marl_cover_coverage_v0",
+        "render_modes": ["human", "rgb_array"],
+        "render_fps": 4,
+        "is_parallelizable": True,
+    }
+
+    def __init__(self, config: CoverageConfig | None = None, **overrides: Any) -> None:
+        """Creates the environment.
+
+        Args:
+            config: A full configuration; ``overrides`` replace its fields.
+            **overrides: Fields of :class:`CoverageConfig`, by name.
+        """
+        base = config or CoverageConfig()
+        if overrides:
+            values = {f: getattr(base, f) for f in base.__dataclass_fields__}
+            unknown = sorted(set(overrides) - set(values))
+            if unknown:
+                raise TypeError(
+                    f"unknown CoverageConfig key(s) {unknown}; valid keys are {sorted(values)}"
+                )
+            values.update(overrides)
+            base = CoverageConfig(**values)
+        self.config = base
+        self.render_mode = base.render_mode
+        self.possible_agents = [f"robot_{i}" for i in range(base.num_robots)]
+        self.agents: list[str] = []
+        self._map_source = make_map_source(base)
+        self._ego_shape = ego_shape(
+            self._map_source.max_waypoints, base.num_robots, base.hops, self._map_source.lattice
+        )
+        self._state_shape = state_shape(
+            self._map_source.max_waypoints, self._map_source.max_waypoint_edges, base.num_robots
+        )
+        action_mask = gymnasium.spaces.Box(0, 1, (NUM_ACTIONS,), np.int8)
+        self._observation_space = graph_space(self._ego_shape, {"action_mask": action_mask})
+        self._action_spaces = {a: gymnasium.spaces.Discrete(NUM_ACTIONS) for a in self.possible_agents}
+        r = base.num_robots
+        self.state_space = graph_space(
+            self._state_shape,
+            {
+                "action_mask": gymnasium.spaces.Box(0, 1, (r, NUM_ACTIONS), np.int8),
+                "robot_nodes": gymnasium.spaces.Box(0, self._state_shape.max_nodes - 1, (r,), np.int64),
+            },
+        )
+        self._rng: np.random.Generator | None = None
+        self._graph: SpatialGraph | None = None
+        self._state_builder: StateBuilder | None = None
+        self._renderer: Any = None
+
+    # ------------------------------------------------------------------ spaces
+    def observation_space(self, agent: str) -> gymnasium.spaces.Dict:
+        """The observation space of ``agent`` (one shared object)."""
+        self._agent_index(agent)
+        return self._observation_space
+
+    def action_space(self, agent: str) -> gymnasium.spaces.Discrete:
+        """The action space of ``agent`` (one object per agent, cached)."""
+        self._agent_index(agent)
+        return self._action_spaces[agent]
+
+    @functools.cached_property
+    def _agent_indices(self) -> dict[str, int]:
+        return {a: i for i, a in enumerate(self.possible_agents)}
+
+    def _agent_index(self, agent: str) -> int:
+        try:
+            return self._agent_indices[agent]
+        except KeyError:
+            raise KeyError(f"unknown agent {agent!r}; agents are {self.possible_agents}") from None
+
+    # ------------------------------------------------------------------ episode
+    def reset(
+        self, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, dict[str, np.ndarray]], dict[str, dict[str, Any]]]:
+        """Starts an episode: draws the map, the points of interest and the start waypoints.
+
+        Args:
+            seed: Seeds the environment's generator (a new one from OS entropy on the first
+                reset without a seed; later resets without a seed continue the generator).
+            options: ``robot_nodes`` (start waypoints, one per robot) and ``interest_nodes``
+                (the points of interest) fix those draws; other keys are ignored with a warning.
+        """
+        if seed is not None or self._rng is None:
+            self._rng = np.random.default_rng(seed)
+        options = dict(options or {})
+        for key in sorted(set(options) - set(RESET_OPTIONS)):
+            warnings.warn(f"reset ignores unknown option {key!r}", stacklevel=2)
+        graph = self._map_source.sample(self._rng)
+        if graph is not self._graph:
+            self._graph = graph
+            self._state_builder = StateBuilder(graph, self.config.num_robots, self._state_shape)
+        self._interest = self._draw_interest(graph, options.get("interest_nodes"))
+        self._robot_node = self._draw_starts(graph, options.get("robot_nodes"))
+        self._visited = np.zeros(graph.num_nodes, dtype=bool)
+        self._visited[self._robot_node] = True
+        self._waypoint_features = np.zeros((graph.num_nodes, NUM_NODE_FEATURES), np.float32)
+        self._waypoint_features[:, 1] = 1.0
+        self._waypoint_features[:, 2] = self._interest & ~self._visited
+        self._num_steps = 0
+        self._credits = np.zeros(self.config.num_robots, dtype=np.int64)
+        self._trails: list[np.ndarray] = [self._robot_node.copy()]
+        self.agents = self.possible_agents[:]
+        zeros = np.zeros(self.config.num_robots, dtype=np.int64)
+        infos = self._infos(zeros, zeros.astype(bool), zeros.astype(bool))
+        return self._observe(), infos
+
+    def _draw_interest(self, graph: SpatialGraph, given: Any) -> np.ndarray:
+        interest = np.zeros(graph.num_nodes, dtype=bool)
+        if given is not None:
+            nodes = self._check_nodes(graph, given, "interest_nodes")
+        else:
+            count = int(self.config.interest_fraction * graph.num_nodes)
+            nodes = self._rng.choice(graph.num_nodes, size=count, replace=False)
+        interest[nodes] = True
+        return interest
+
+    def _draw_starts(self, graph: SpatialGraph, given: Any) -> np.ndarray:
+        r = self.config.num_robots
+        if given is not None:
+            nodes = self._check_nodes(graph, given, "robot_nodes")
+            if len(nodes) != r or len(np.unique(nodes)) != r:
+                raise ValueError(f"options['robot_nodes'] must hold {r} distinct waypoints, got {given}")
+            return nodes
+        if graph.num_nodes < r:
+            raise ValueError(f"{r} robots do not fit on a map of {graph.num_nodes} waypoints")
+        centre = int(self._rng.integers(graph.num_nodes))
+        ball = graph.bfs_ball(centre, self.config.start_density * r)
+        if len(ball) < r:
+            raise ValueError(
+                f"the component around waypoint {centre} has {len(ball)} waypoints, fewer than "
+                f"the {r} robots"
+            )
+        return self._rng.choice(ball, size=r, replace=False).astype(np.int64)
+
+    @staticmethod
+    def _check_nodes(graph: SpatialGraph, given: Any, key: str) -> np.ndarray:
+        nodes = np.asarray(given, dtype=np.int64).reshape(-1)
+        if len(nodes) and (nodes.min() < 0 or nodes.max() >= graph.num_nodes):
+            raise ValueError(f"options[{key!r}] holds a waypoint outside [0, {graph.num_nodes})")
+        return nodes
+
+    def step(
+        self, actions: dict[str, Any]
+    ) -> tuple[
+        dict[str, dict[str, np.ndarray]],
+        dict[str, float],
+        dict[str, bool],
+        dict[str, bool],
+        dict[str, dict[str, Any]],
+    ]:
+        """Moves every robot one step.
+
+        Args:
+            actions: One action in ``[0, 5)`` for every live agent.
+
+        Raises:
+            RuntimeError: the episode is over (call ``reset``).
+            ValueError: an agent is missing or unknown, an action is out of range, or (with
+                ``invalid_action="raise"``) an action is masked out; the message names the robot.
+        """
+        if not self.agents:
+            raise RuntimeError("step() called with no live agents; call reset() first")
+        action = self._read_actions(actions)  # (R,)
+        targets, invalid = self._targets(action)  # (R,), (R,)
+        next_node = resolve_collisions(self._robot_node, targets, self.config.allow_swaps)
+        blocked = next_node != targets
+        new_interest = self._visit(next_node)  # (R,)
+        self._num_steps += 1
+        terminated = not (self._interest & ~self._visited).any()
+        truncated = self._num_steps >= self.config.max_steps and not terminated
+        reward = float(new_interest.sum())
+        observations = self._observe()
+        infos = self._infos(new_interest, blocked, invalid)
+        agents = self.agents
+        if terminated or truncated:
+            self.agents = []
+        return (
+            observations,
+            dict.fromkeys(agents, reward),
+            dict.fromkeys(agents, terminated),
+            dict.fromkeys(agents, truncated),
+            infos,
+        )
+
+    def _read_actions(self, actions: dict[str, Any]) -> np.ndarray:
+        missing = [a for a in self.agents if a not in actions]
+        if missing:
+            raise ValueError(f"no action given for {missing}")
+        unknown = [a for a in actions if a not in self._agent_indices]
+        if unknown:
+            raise ValueError(f"actions given for unknown agents {unknown}")
+        action = np.empty(len(self.possible_agents), dtype=np.int64)
+        for agent, i in self._agent_indices.items():
+            value = actions[agent]
+            if not (np.ndim(value) == 0 and float(value) == int(value) and 0 <= value < NUM_ACTIONS):
+                raise ValueError(f"action of {agent} must be an integer in [0, 5), got {value!r}")
+            action[i] = int(value)
+        return action
+
+    def _targets(self, action: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Target waypoint of each robot, and which actions were masked out (and become stays)."""
+        slots = action_targets(self._graph, self._robot_node)  # (R, 5)
+        target = slots[np.arange(len(action)), action]
+        invalid = target < 0
+        if invalid.any() and self.config.invalid_action == "raise":
+            i = int(np.flatnonzero(invalid)[0])
+            raise ValueError(
+                f"action {action[i]} of {self.possible_agents[i]} is masked out: waypoint "
+                f"{self._robot_node[i]} has no neighbour that way"
+            )
+        return np.where(invalid, self._robot_node, target), invalid
+
+    def _visit(self, next_node: np.ndarray) -> np.ndarray:
+        """Moves the robots; returns the points of interest each visited first, ``(R,)``."""
+        new_interest = (self._interest[next_node] & ~self._visited[next_node]).astype(np.int64)
+        self._visited[next_node] = True
+        self._waypoint_features[next_node, 2] = 0.0
+        self._robot_node = next_node
+        self._credits += new_interest
+        self._trails.append(next_node.copy())
+        return new_interest
+
+    def _infos(
+        self, new_interest: np.ndarray, blocked: np.ndarray, invalid: np.ndarray
+    ) -> dict[str, dict[str, Any]]:
+        return {
+            agent: {
+                "new_interest": int(new_interest[i]),
+                "total_interest": int(self._credits[i]),
+                "blocked": bool(blocked[i]),
+                "invalid_action": bool(invalid[i]),
+            }
+            for i, agent in enumerate(self.possible_agents)
+        }
+
+    def _observe(self) -> dict[str, dict[str, np.ndarray]]:
+        batch = build_ego_graphs(
+            self._graph, self._robot_node, self._waypoint_features, self.config.hops, self._ego_shape
+        )
+        return {
+            agent: {key: value[i] for key, value in batch.items()}
+            for i, agent in enumerate(self.possible_agents)
+        }
+
+    def observe_batch(self) -> dict[str, np.ndarray]:
+        """Every robot's observation stacked on a leading robot axis (fresh arrays)."""
+        self._require_episode()
+        return build_ego_graphs(
+            self._graph, self._robot_node, self._waypoint_features, self.config.hops, self._ego_shape
+        )
+
+    def state(self) -> dict[str, np.ndarray]:
+        """The whole graph in the observation encoding (see the module docstring)."""
+        self._require_episode()
+        return self._state_builder.build(self._robot_node, self._waypoint_features)
+
+    def snapshot(self) -> CoverageSnapshot:
+        """A read-only copy of the episode's state for planners."""
+        self._require_episode()
+        return CoverageSnapshot(
+            graph=self._graph,
+            robot_node=self._robot_node.copy(),
+            interest=self._interest.copy(),
+            visited=self._visited.copy(),
+            num_steps=self._num_steps,
+            max_steps=self.config.max_steps,
+            hops=self.config.hops,
+        )
+
+    def _require_episode(self) -> None:
+        if self._graph is None:
+            raise RuntimeError("no episode yet; call reset() first")
+
+    # ------------------------------------------------------------------ rendering
+    def render(self) -> np.ndarray | None:
+        """Draws the map, the points of interest, the robots and their trails.
+
+        Returns an ``(H, W, 3)`` uint8 image in ``"rgb_array"`` mode, ``None`` otherwise.
+        """
+        if self.render_mode is None:
+            gymnasium.logger.warn("render() called without a render_mode; nothing drawn")
+            return None
+        self._require_episode()
+        from marl_cover.render import Renderer
+
+        if self._renderer is None:
+            self._renderer = Renderer(self.render_mode)
+        return self._renderer.draw(
+            self._graph,
+            self._robot_node,
+            self._interest,
+            self._visited,
+            np.stack(self._trails),
+            title=f"step {self._num_steps}/{self.config.max_steps}   "
+            f"covered {int((self._interest & self._visited).sum())}/{int(self._interest.sum())}",
+        )
+
+    def close(self) -> None:
+        """Closes the render window, if any."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+
+def _config_kwargs(kwargs: dict[str, Any]) -> dict[str, Any]:
+    """Maps PettingZoo's ``max_cycles`` to ``max_steps``."""
+    if "max_cycles" in kwargs:
+        if "max_steps" in kwargs:
+            raise TypeError("give max_steps or max_cycles, not both")
+        kwargs = dict(kwargs)
+        kwargs["max_steps"] = kwargs.pop("max_cycles")
+    return kwargs
+
+
+def parallel_env(config: CoverageConfig | None = None, **kwargs: Any) -> CoverageEnv:
+    """The coverage environment as a PettingZoo ``ParallelEnv``.
+
+    Args:
+        config: A full :class:`CoverageConfig`; keyword arguments override its fields.
+        **kwargs: Fields of :class:`CoverageConfig` (``max_cycles`` = ``max_steps``).
+    """
+    return CoverageEnv(config, **_config_kwargs(kwargs))
+
+
+def env(config: CoverageConfig | None = None, **kwargs: Any):  # noqa: ANN201 (PettingZoo type)
+    """The coverage environment as a PettingZoo AEC env (``parallel_to_aec``)."""
+    return parallel_to_aec(parallel_env(config, **kwargs))

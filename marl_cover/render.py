@@ -1,0 +1,103 @@
+"""Matplotlib drawings of coverage episodes (imported lazily: matplotlib is optional)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from marl_cover.graph import SpatialGraph
+
+WAYPOINT_COLOUR = "#c8c8c8"
+INTEREST_COLOUR = "#f28e2b"
+COVERED_COLOUR = "#59a14f"
+
+
+def _pyplot(interactive: bool):  # noqa: ANN202 (matplotlib module)
+    import matplotlib
+
+    if not interactive:
+        matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def draw_map(
+    ax,  # noqa: ANN001 (matplotlib Axes)
+    graph: SpatialGraph,
+    robot_node: np.ndarray,
+    interest: np.ndarray,
+    visited: np.ndarray,
+    trails: np.ndarray | None = None,
+) -> None:
+    """Draws waypoints, points of interest (orange, green once covered), trails and robots.
+
+    Args:
+        ax: A matplotlib ``Axes``.
+        graph: The map.
+        robot_node: ``(R,)`` waypoint of each robot.
+        interest: ``(N,)`` bool, points of interest.
+        visited: ``(N,)`` bool, visited waypoints.
+        trails: ``(T + 1, R)`` waypoints of each robot over time, or ``None``.
+    """
+    import matplotlib.pyplot as plt
+
+    pos = graph.positions
+    senders, receivers = graph.edge_index
+    keep = senders < receivers
+    segments = np.stack([pos[senders[keep]], pos[receivers[keep]]], axis=1)
+    from matplotlib.collections import LineCollection
+
+    ax.add_collection(LineCollection(segments, colors=WAYPOINT_COLOUR, linewidths=0.5, zorder=0))
+    size = max(2.0, 4000.0 / max(graph.num_nodes, 1))
+    ax.scatter(*pos[~interest].T, s=size * 0.3, c=WAYPOINT_COLOUR, zorder=1)
+    ax.scatter(*pos[interest & ~visited].T, s=size, c=INTEREST_COLOUR, zorder=2)
+    ax.scatter(*pos[interest & visited].T, s=size, c=COVERED_COLOUR, alpha=0.5, zorder=2)
+    colours = plt.get_cmap("tab10")(np.arange(len(robot_node)) % 10)
+    if trails is not None and len(trails) > 1:
+        for r in range(len(robot_node)):
+            ax.plot(*pos[trails[:, r]].T, color=colours[r], linewidth=1.5, alpha=0.8, zorder=3)
+    ax.scatter(*pos[robot_node].T, s=size * 4, c=colours, edgecolors="black", zorder=4)
+    ax.set_aspect("equal")
+    ax.autoscale_view()
+    ax.set_xticks([])
+    ax.set_yticks([])
+
+
+def figure_to_array(fig) -> np.ndarray:  # noqa: ANN001 (matplotlib Figure)
+    """The RGB pixels of a drawn figure, ``(H, W, 3)`` uint8."""
+    fig.canvas.draw()
+    return np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
+
+
+class Renderer:
+    """Keeps one figure per environment and redraws it each call."""
+
+    def __init__(self, mode: str, size_inches: float = 6.0) -> None:
+        self.mode = mode
+        self._plt = _pyplot(interactive=mode == "human")
+        self.fig, self.ax = self._plt.subplots(figsize=(size_inches, size_inches), dpi=100)
+        if mode == "human":
+            self._plt.ion()
+
+    def draw(
+        self,
+        graph: SpatialGraph,
+        robot_node: np.ndarray,
+        interest: np.ndarray,
+        visited: np.ndarray,
+        trails: np.ndarray,
+        title: str = "",
+    ) -> np.ndarray | None:
+        """Redraws the episode; returns the pixels in ``"rgb_array"`` mode."""
+        self.ax.clear()
+        draw_map(self.ax, graph, robot_node, interest, visited, trails)
+        self.ax.set_title(title)
+        if self.mode == "rgb_array":
+            return figure_to_array(self.fig)
+        self.fig.canvas.draw_idle()
+        self.fig.canvas.flush_events()
+        return None
+
+    def close(self) -> None:
+        """Closes the figure."""
+        self._plt.close(self.fig)

@@ -1,0 +1,241 @@
+"""The coverage environment on tiny hand-built graphs: exact observations, rewards, rules."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import marl_cover
+from marl_cover.config import CoverageConfig
+from marl_cover.graph import SpatialGraph
+
+SINK = -1  # the last padded node
+
+
+def real_edges(obs: dict[str, np.ndarray]) -> list[tuple[int, int]]:
+    return [tuple(e) for e in obs["edge_index"][:, obs["edge_mask"]].T.tolist()]
+
+
+def make(graph: SpatialGraph, robots: list[int], interest: list[int], **config):
+    env = marl_cover.parallel_env(graph=graph, num_robots=len(robots), **config)
+    obs, infos = env.reset(seed=0, options={"robot_nodes": robots, "interest_nodes": interest})
+    return env, obs, infos
+
+
+def test_ego_graph_exact(tee_graph: SpatialGraph) -> None:
+    env, obs, _ = make(tee_graph, [0, 3], [2, 5], hops=2)
+    o = obs["robot_0"]
+    m = o["nodes"].shape[0]
+    # node 0 = ego robot; waypoints within 2 hops of waypoint 0: 0, 1, 2, 4 -> local 1..4;
+    # robot_1 stands on waypoint 3, three hops away: not in the ego-graph.
+    assert o["node_mask"].tolist() == [True] * 5 + [False] * (m - 5)
+    assert o["nodes"][:5].tolist() == [
+        [1, 0, 0, 0],
+        [0, 1, 0, 0],  # waypoint 0 (the robot's own, visited at reset)
+        [0, 1, 0, 0],  # waypoint 1
+        [0, 1, 1, 0],  # waypoint 2, of interest
+        [0, 1, 0, 0],  # waypoint 4
+    ]
+    assert o["node_pos"][:5].tolist() == [[0, 0], [0, 0], [1, 0], [2, 0], [1, 1]]
+    assert o["action_mask"].tolist() == [1, 1, 0, 0, 0]
+    sink = m - 1
+    assert o["edge_index"][:, :10].T.tolist() == [
+        [1, 0], [2, 0], [sink, sink], [sink, sink], [sink, sink],
+        [0, 1], [0, 2], [sink, sink], [sink, sink], [sink, sink],
+    ]
+    assert real_edges(o) == [
+        (1, 0), (2, 0), (0, 1), (0, 2),
+        (1, 2), (2, 3), (2, 4), (2, 1), (3, 2), (4, 2),
+    ]
+    assert o["edge_attr"][o["edge_mask"], 0].tolist() == [0, 1, 0, 1, 1, 1, 1, 1, 1, 1]
+    assert env.observation_space("robot_0").contains(o)
+
+
+def test_ego_graph_includes_other_robots_and_their_edges(tee_graph: SpatialGraph) -> None:
+    _, obs, _ = make(tee_graph, [0, 2], [5], hops=2)
+    o = obs["robot_0"]
+    # robot_1 on waypoint 2 (two hops) is node 5; its stay (2) and west (1) targets are in the
+    # ball, its east target (3) is not.
+    assert o["node_mask"].sum() == 6
+    assert o["nodes"][5].tolist() == [1, 0, 0, 0]
+    assert o["node_pos"][5].tolist() == [2, 0]
+    assert real_edges(o)[-4:] == [(3, 5), (5, 3), (2, 5), (5, 2)]
+    # robot_1 sees robot_0 too: waypoints 0..4 within two hops of waypoint 2, robot_0 last
+    o1 = obs["robot_1"]
+    assert o1["node_mask"].sum() == 1 + 5 + 1
+    assert o1["action_mask"].tolist() == [1, 1, 0, 1, 0]
+
+
+def test_hops_one_has_no_other_robots(tee_graph: SpatialGraph) -> None:
+    _, obs, _ = make(tee_graph, [1, 2], [5], hops=1)
+    o = obs["robot_0"]
+    assert o["node_mask"].sum() == 1 + 4  # waypoints 0, 1, 2, 4; robot_1 is two hops away
+    assert o["nodes"][: 5, 0].tolist() == [1, 0, 0, 0, 0]
+
+
+def test_rewards_infos_and_termination(path_graph: SpatialGraph) -> None:
+    env, obs, infos = make(path_graph, [0, 7], [1, 2, 6], max_steps=10)
+    assert infos["robot_0"] == {
+        "new_interest": 0, "total_interest": 0, "blocked": False, "invalid_action": False
+    }
+    east, west = 1, 3
+    obs, rew, term, trunc, infos = env.step({"robot_0": east, "robot_1": west})
+    assert rew == {"robot_0": 2.0, "robot_1": 2.0}
+    assert infos["robot_0"]["new_interest"] == 1 and infos["robot_1"]["new_interest"] == 1
+    assert not any(term.values()) and not any(trunc.values())
+    obs, rew, term, trunc, infos = env.step({"robot_0": east, "robot_1": west})
+    assert rew["robot_0"] == 1.0  # robot_0 reaches 2, robot_1 reaches 5 (not of interest)
+    assert all(term.values()) and not any(trunc.values())
+    assert infos["robot_0"]["total_interest"] == 2 and infos["robot_1"]["total_interest"] == 1
+    assert env.agents == []
+    with pytest.raises(RuntimeError, match="reset"):
+        env.step({})
+
+
+def test_truncation_after_exactly_max_steps(path_graph: SpatialGraph) -> None:
+    env, *_ = make(path_graph, [3], [0, 7], max_steps=4)
+    for step in range(4):
+        assert env.agents == ["robot_0"]
+        _, rew, term, trunc, _ = env.step({"robot_0": 0})
+        assert rew["robot_0"] == 0.0 and not term["robot_0"]
+        assert trunc["robot_0"] == (step == 3)
+    assert env.agents == []
+
+
+def test_revisits_and_collisions_pay_nothing(path_graph: SpatialGraph) -> None:
+    env, *_ = make(path_graph, [2, 4], [3, 5])
+    # both head for waypoint 3: robot_0 (lower index) gets it, robot_1 is blocked
+    _, rew, _, _, infos = env.step({"robot_0": 1, "robot_1": 3})
+    assert rew["robot_0"] == 1.0
+    assert infos["robot_0"]["blocked"] is False and infos["robot_1"]["blocked"] is True
+    assert env.snapshot().robot_node.tolist() == [3, 4]
+    _, rew, _, _, _ = env.step({"robot_0": 3, "robot_1": 3})  # back to 2, and into 3
+    assert rew["robot_0"] == 0.0
+    assert env.snapshot().robot_node.tolist() == [2, 3]
+
+
+def test_masked_action_is_a_counted_noop(path_graph: SpatialGraph) -> None:
+    env, *_ = make(path_graph, [0], [5])
+    north = 2
+    _, rew, _, _, infos = env.step({"robot_0": north})
+    assert infos["robot_0"]["invalid_action"] is True
+    assert env.snapshot().robot_node.tolist() == [0]
+
+
+def test_masked_action_can_raise(path_graph: SpatialGraph) -> None:
+    env, *_ = make(path_graph, [0, 5], [5], invalid_action="raise")
+    with pytest.raises(ValueError, match="robot_1"):
+        env.step({"robot_0": 0, "robot_1": 4})
+
+
+@pytest.mark.parametrize(
+    ("actions", "message"),
+    [
+        ({"robot_0": 0}, "no action given for \\['robot_1'\\]"),
+        ({"robot_0": 0, "robot_1": 0, "robot_9": 0}, "unknown agents \\['robot_9'\\]"),
+        ({"robot_0": 0, "robot_1": 7}, "action of robot_1"),
+        ({"robot_0": 1.5, "robot_1": 0}, "action of robot_0"),
+    ],
+)
+def test_bad_actions_name_the_robot(path_graph: SpatialGraph, actions, message) -> None:
+    env, *_ = make(path_graph, [0, 5], [5])
+    with pytest.raises(ValueError, match=message):
+        env.step(actions)
+
+
+def test_config_errors_name_the_key(path_graph: SpatialGraph) -> None:
+    with pytest.raises(TypeError, match="hopz"):
+        marl_cover.parallel_env(hopz=3)
+    with pytest.raises(TypeError, match="colour"):
+        CoverageConfig.from_dict({"colour": 1})
+    with pytest.raises(ValueError, match="num_robots"):
+        marl_cover.parallel_env(num_robots=0)
+    with pytest.raises(ValueError, match="9 robots do not fit"):
+        marl_cover.parallel_env(graph=path_graph, num_robots=9)
+    with pytest.raises(ValueError, match="neither a preset"):
+        marl_cover.parallel_env(map="atlantis")
+    with pytest.raises(FileNotFoundError, match="nowhere.npy"):
+        marl_cover.parallel_env(map="nowhere.npy")
+    with pytest.raises(TypeError, match="not both"):
+        marl_cover.parallel_env(max_steps=3, max_cycles=3)
+
+
+def test_reset_draws_paper_defaults() -> None:
+    env = marl_cover.parallel_env(num_robots=4, city_size=300)
+    env.reset(seed=5)
+    snap = env.snapshot()
+    assert snap.interest.sum() == 150
+    assert len(np.unique(snap.robot_node)) == 4
+    assert snap.visited.sum() == 4 and snap.visited[snap.robot_node].all()
+    # start waypoints lie in a breadth-first ball of >= 20 waypoints: within a few hops
+    dist = snap.graph.hop_distances(snap.robot_node[:1])[0]
+    assert dist[snap.robot_node].max() <= 8
+
+
+def run_episode(env, seed: int, steps: int, action_seed: int):
+    rng = np.random.default_rng(action_seed)
+    obs, _ = env.reset(seed=seed)
+    trace = [obs]
+    for _ in range(steps):
+        if not env.agents:
+            obs, _ = env.reset()
+        actions = {a: int(rng.integers(5)) for a in env.agents}
+        trace.append(env.step(actions))
+    return trace
+
+
+def assert_same(a, b) -> None:
+    if isinstance(a, dict):
+        assert a.keys() == b.keys()
+        for key in a:
+            assert_same(a[key], b[key])
+    elif isinstance(a, (tuple, list)):
+        assert len(a) == len(b)
+        for x, y in zip(a, b, strict=True):
+            assert_same(x, y)
+    elif isinstance(a, np.ndarray):
+        assert a.dtype == b.dtype and np.array_equal(a, b)
+    else:
+        assert a == b
+
+
+@pytest.mark.parametrize("map_name", ["city", "paper"])
+def test_same_seed_same_episode_over_100_steps(map_name: str, request) -> None:
+    if map_name == "paper":
+        request.getfixturevalue("paper_map_available")
+    config = {"map": map_name, "hops": 5, "max_steps": 30}
+    first = run_episode(marl_cover.parallel_env(**config), 11, 100, 3)
+    second = run_episode(marl_cover.parallel_env(**config), 11, 100, 3)
+    assert_same(first, second)
+    other = run_episode(marl_cover.parallel_env(**config), 12, 100, 3)
+    assert not np.array_equal(first[0]["robot_0"]["nodes"], other[0]["robot_0"]["nodes"])
+
+
+def test_state_encodes_the_whole_graph(tee_graph: SpatialGraph) -> None:
+    env, *_ = make(tee_graph, [0, 2], [5])
+    state = env.state()
+    assert env.state_space.contains(state)
+    assert state["robot_nodes"].tolist() == [0, 1]
+    assert state["node_mask"].sum() == 2 + 6
+    assert state["nodes"][:8, :3].tolist() == [
+        [1, 0, 0], [1, 0, 0],
+        [0, 1, 0], [0, 1, 0], [0, 1, 0], [0, 1, 0], [0, 1, 0], [0, 1, 1],
+    ]
+    sink = state["nodes"].shape[0] - 1
+    # action edges in: robot r slot k at 5 r + k; waypoint w is node 2 + w
+    assert state["edge_index"][:, :10].T.tolist() == [
+        [2, 0], [3, 0], [sink, sink], [sink, sink], [sink, sink],
+        [4, 1], [5, 1], [sink, sink], [3, 1], [sink, sink],
+    ]
+    assert state["action_mask"].tolist() == [[1, 1, 0, 0, 0], [1, 1, 0, 1, 0]]
+    assert state["edge_mask"].sum() == 2 * (2 + 3) + tee_graph.num_edges
+
+
+def test_registered_ids() -> None:
+    import pettingzoo
+
+    env = pettingzoo.make("parallel", "marl_cover/Coverage-v0", num_robots=2, hops=3)
+    assert env.possible_agents == ["robot_0", "robot_1"]
+    aec = pettingzoo.make("aec", "marl_cover/Coverage-v0", num_robots=2, hops=3)
+    aec.reset(seed=0)
+    assert aec.agent_selection == "robot_0"
