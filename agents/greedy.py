@@ -102,8 +102,10 @@ class GreedyPolicy(_GreedyBase):
         agents = list(observations)
         if not agents:
             return {}
-        batch = {key: np.stack([observations[a][key] for a in agents]) for key in
-                 ("nodes", "edge_index", "edge_mask", "action_mask")}
+        batch = {
+            key: np.stack([observations[a][key] for a in agents])
+            for key in ("nodes", "edge_index", "edge_mask", "action_mask")
+        }
         return dict(zip(agents, self.act_batch(batch).tolist(), strict=True))
 
     def act_batch(self, batch: dict[str, np.ndarray]) -> np.ndarray:

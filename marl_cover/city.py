@@ -54,7 +54,9 @@ class CityConfig:
             )
 
 
-def city_occupancy(shape: tuple[int, int], rng: np.random.Generator, config: CityConfig) -> np.ndarray:
+def city_occupancy(
+    shape: tuple[int, int], rng: np.random.Generator, config: CityConfig
+) -> np.ndarray:
     """A ``(rows, cols)`` occupancy grid of a city, ``True`` = building or tree."""
     rows, cols = shape
     occupied = np.zeros(shape, dtype=bool)
@@ -87,9 +89,11 @@ def _fill_block(
     horizontal = (c1 - c0) >= (r1 - r0)
     lo, hi = (c0, c1) if horizontal else (r0, r1)
     max_parts = max(1, min(4, (hi - lo + 1) // 4))
-    cuts = np.sort(rng.choice(np.arange(lo + 2, hi - 1), size=max_parts - 1, replace=False)) if (
-        max_parts > 1 and hi - lo > 4
-    ) else np.array([], dtype=np.int64)
+    cuts = (
+        np.sort(rng.choice(np.arange(lo + 2, hi - 1), size=max_parts - 1, replace=False))
+        if (max_parts > 1 and hi - lo > 4)
+        else np.array([], dtype=np.int64)
+    )
     edges = [lo, *cuts.tolist(), hi]
     for a, b in zip(edges[:-1], edges[1:], strict=True):
         b_end = b if b == hi else b - 1  # leave a one-cell alley before the next building

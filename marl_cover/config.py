@@ -26,9 +26,7 @@ def config_from_dict(cls: type[T], values: dict[str, Any]) -> T:
     names = {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
     unknown = sorted(set(values) - names)
     if unknown:
-        raise TypeError(
-            f"unknown {cls.__name__} key(s) {unknown}; valid keys are {sorted(names)}"
-        )
+        raise TypeError(f"unknown {cls.__name__} key(s) {unknown}; valid keys are {sorted(names)}")
     return cls(**values)
 
 
@@ -57,6 +55,8 @@ class CoverageConfig:
         min_window_nodes: Smallest window accepted, in waypoints.
         graph: A ready-made map; overrides ``map``.
         render_mode: ``None``, ``"human"`` or ``"rgb_array"``.
+        ego_backend: How ego-graphs are built: ``"auto"`` (``"numba"`` if installed, else
+            ``"numpy"``), ``"numpy"`` or ``"numba"``; all give identical observations.
     """
 
     num_robots: int = 4
@@ -74,6 +74,7 @@ class CoverageConfig:
     min_window_nodes: int = 200
     graph: SpatialGraph | None = field(default=None, repr=False)
     render_mode: str | None = None
+    ego_backend: str = "auto"
 
     def __post_init__(self) -> None:
         checks = [
@@ -98,6 +99,10 @@ class CoverageConfig:
             (
                 self.render_mode is None or self.render_mode in RENDER_MODES,
                 f"render_mode must be None or one of {RENDER_MODES}, got {self.render_mode!r}",
+            ),
+            (
+                self.ego_backend in ("auto", "numpy", "numba"),
+                f"ego_backend must be 'auto', 'numpy' or 'numba', got {self.ego_backend!r}",
             ),
             (
                 self.graph is None or isinstance(self.graph, SpatialGraph),

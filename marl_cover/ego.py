@@ -104,14 +104,47 @@ def _action_distances(graph: SpatialGraph, robot_node: np.ndarray) -> np.ndarray
     return np.concatenate([zeros, graph.neighbor_distances[robot_node]], axis=1)
 
 
+#: Implementations of :func:`build_ego_graphs`.
+EGO_BACKENDS = ("auto", "numpy", "numba")
+
+
+def numba_available() -> bool:
+    """Whether the compiled ego-graph kernel (optional dependency numba) can be used."""
+    try:
+        import marl_cover._ego_numba  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def resolve_backend(backend: str) -> str:
+    """``"auto"`` becomes ``"numba"`` when numba is installed, else ``"numpy"``.
+
+    Raises:
+        ValueError: an unknown backend, or ``"numba"`` without numba installed.
+    """
+    if backend not in EGO_BACKENDS:
+        raise ValueError(f"ego backend must be one of {EGO_BACKENDS}, got {backend!r}")
+    if backend == "auto":
+        return "numba" if numba_available() else "numpy"
+    if backend == "numba" and not numba_available():
+        raise ValueError("ego backend 'numba' needs the numba package (pip install numba)")
+    return backend
+
+
 def build_ego_graphs(
     graph: SpatialGraph,
     robot_node: np.ndarray,
     waypoint_features: np.ndarray,
     hops: int,
     shape: PaddedShape,
+    backend: str = "numpy",
 ) -> dict[str, np.ndarray]:
     """Every robot's padded ego-graph, batched over robots.
+
+    Both backends return identical arrays; ``"numba"`` (a compiled breadth-first search per
+    robot) is faster, ``"numpy"`` (one batched ``dijkstra`` and flat scatters) needs nothing
+    beyond numpy and scipy.
 
     Args:
         graph: The map.
@@ -126,6 +159,8 @@ def build_ego_graphs(
         ``edge_index (R, 2, E)``, ``edge_attr (R, E, 1)``, ``edge_mask (R, E)``,
         ``action_mask (R, 5)`` int8.
     """
+    if backend == "numba":
+        return _build_ego_graphs_numba(graph, robot_node, waypoint_features, hops, shape)
     # Rows of features and positions move as single complex numbers (one 16- or 8-byte item),
     # and every scatter goes through a flat index: numpy's multi-axis fancy indexing is several
     # times slower at these sizes.
@@ -207,7 +242,10 @@ def build_ego_graphs(
     num_ww = np.bincount(er, minlength=num_robots)
     slot = NUM_EGO_ACTION_EDGES + np.arange(len(er)) - (np.cumsum(num_ww) - num_ww)[er]
     put_edges(
-        er, slot, w_local[row], local[nbr_flat.reshape(-1)[hit]],
+        er,
+        slot,
+        w_local[row],
+        local[nbr_flat.reshape(-1)[hit]],
         graph.neighbor_distances.reshape(-1)[(w_idx[row] << 2) + (hit & 3)],
     )
 
@@ -239,6 +277,41 @@ def build_ego_graphs(
         "edge_mask": edge_mask,
         "action_mask": action_mask.astype(np.int8),
     }
+
+
+def _build_ego_graphs_numba(
+    graph: SpatialGraph,
+    robot_node: np.ndarray,
+    waypoint_features: np.ndarray,
+    hops: int,
+    shape: PaddedShape,
+) -> dict[str, np.ndarray]:
+    from marl_cover._ego_numba import fill_ego_graphs
+
+    r, m, e = len(robot_node), shape.max_nodes, shape.max_edges
+    out = {
+        "nodes": np.zeros((r, m, NUM_NODE_FEATURES), dtype=np.float32),
+        "node_pos": np.zeros((r, m, 2), dtype=np.float32),
+        "node_mask": np.zeros((r, m), dtype=bool),
+        "edge_index": np.full((r, 2, e), m - 1, dtype=np.int64),
+        "edge_attr": np.zeros((r, e, 1), dtype=np.float32),
+        "edge_mask": np.zeros((r, e), dtype=bool),
+        "action_mask": np.zeros((r, NUM_ACTIONS), dtype=np.int8),
+    }
+    status = fill_ego_graphs(
+        graph.neighbors,
+        graph.neighbor_distances,
+        graph.float_cells,
+        np.ascontiguousarray(waypoint_features, dtype=np.float32),
+        np.asarray(robot_node, dtype=np.int64),
+        hops,
+        *out.values(),
+    )
+    if status == -1:
+        raise RuntimeError(f"an ego-graph has more nodes than its padded bound {m - 1}")
+    if status == -2:
+        raise RuntimeError(f"an ego-graph has more edges than its padded bound {e}")
+    return out
 
 
 class StateBuilder:

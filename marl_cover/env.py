@@ -86,6 +86,7 @@ from marl_cover.ego import (
     build_ego_graphs,
     ego_shape,
     graph_space,
+    resolve_backend,
     state_shape,
 )
 from marl_cover.graph import SpatialGraph
@@ -155,6 +156,7 @@ class CoverageEnv(ParallelEnv):
         self.possible_agents = [f"robot_{i}" for i in range(base.num_robots)]
         self.agents: list[str] = []
         self._map_source = make_map_source(base)
+        self._ego_backend = resolve_backend(base.ego_backend)
         self._ego_shape = ego_shape(
             self._map_source.max_waypoints, base.num_robots, base.hops, self._map_source.lattice
         )
@@ -163,13 +165,17 @@ class CoverageEnv(ParallelEnv):
         )
         action_mask = gymnasium.spaces.Box(0, 1, (NUM_ACTIONS,), np.int8)
         self._observation_space = graph_space(self._ego_shape, {"action_mask": action_mask})
-        self._action_spaces = {a: gymnasium.spaces.Discrete(NUM_ACTIONS) for a in self.possible_agents}
+        self._action_spaces = {
+            a: gymnasium.spaces.Discrete(NUM_ACTIONS) for a in self.possible_agents
+        }
         r = base.num_robots
         self.state_space = graph_space(
             self._state_shape,
             {
                 "action_mask": gymnasium.spaces.Box(0, 1, (r, NUM_ACTIONS), np.int8),
-                "robot_nodes": gymnasium.spaces.Box(0, self._state_shape.max_nodes - 1, (r,), np.int64),
+                "robot_nodes": gymnasium.spaces.Box(
+                    0, self._state_shape.max_nodes - 1, (r,), np.int64
+                ),
             },
         )
         self._rng: np.random.Generator | None = None
@@ -249,7 +255,9 @@ class CoverageEnv(ParallelEnv):
         if given is not None:
             nodes = self._check_nodes(graph, given, "robot_nodes")
             if len(nodes) != r or len(np.unique(nodes)) != r:
-                raise ValueError(f"options['robot_nodes'] must hold {r} distinct waypoints, got {given}")
+                raise ValueError(
+                    f"options['robot_nodes'] must hold {r} distinct waypoints, got {given}"
+                )
             return nodes
         if graph.num_nodes < r:
             raise ValueError(f"{r} robots do not fit on a map of {graph.num_nodes} waypoints")
@@ -322,7 +330,9 @@ class CoverageEnv(ParallelEnv):
         action = np.empty(len(self.possible_agents), dtype=np.int64)
         for agent, i in self._agent_indices.items():
             value = actions[agent]
-            if not (np.ndim(value) == 0 and float(value) == int(value) and 0 <= value < NUM_ACTIONS):
+            if not (
+                np.ndim(value) == 0 and float(value) == int(value) and 0 <= value < NUM_ACTIONS
+            ):
                 raise ValueError(f"action of {agent} must be an integer in [0, 5), got {value!r}")
             action[i] = int(value)
         return action
@@ -364,9 +374,7 @@ class CoverageEnv(ParallelEnv):
         }
 
     def _observe(self) -> dict[str, dict[str, np.ndarray]]:
-        batch = build_ego_graphs(
-            self._graph, self._robot_node, self._waypoint_features, self.config.hops, self._ego_shape
-        )
+        batch = self.observe_batch()
         return {
             agent: {key: value[i] for key, value in batch.items()}
             for i, agent in enumerate(self.possible_agents)
@@ -376,7 +384,12 @@ class CoverageEnv(ParallelEnv):
         """Every robot's observation stacked on a leading robot axis (fresh arrays)."""
         self._require_episode()
         return build_ego_graphs(
-            self._graph, self._robot_node, self._waypoint_features, self.config.hops, self._ego_shape
+            self._graph,
+            self._robot_node,
+            self._waypoint_features,
+            self.config.hops,
+            self._ego_shape,
+            self._ego_backend,
         )
 
     def state(self) -> dict[str, np.ndarray]:

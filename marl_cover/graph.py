@@ -167,10 +167,14 @@ class SpatialGraph:
         return (np.linalg.norm(delta, axis=-1) / self.cell_size).astype(np.float32)
 
     @cached_property
+    def float_cells(self) -> np.ndarray:
+        """Positions in cells, ``(num_nodes, 2)`` float32, C-contiguous."""
+        return np.ascontiguousarray((self.positions / self.cell_size).astype(np.float32))
+
+    @cached_property
     def complex_cells(self) -> np.ndarray:
         """Positions in cells as ``x + iy``, ``(num_nodes,)`` complex64 (one item per node)."""
-        cells = (self.positions / self.cell_size).astype(np.float32)
-        return np.ascontiguousarray(cells).view(np.complex64).reshape(-1)
+        return self.float_cells.view(np.complex64).reshape(-1)
 
     @cached_property
     def adjacency(self) -> csr_matrix:

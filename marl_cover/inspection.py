@@ -79,20 +79,43 @@ def draw_ego(
             ax.scatter(*np.array([pos[n] for n in selected]).T, **style)
 
     waypoints = [n for n in graph if graph.nodes[n]["kind"] == "waypoint"]
-    scatter([n for n in waypoints if not graph.nodes[n]["is_interest"]], s=12, c="#bbbbbb",
-            zorder=1, label="waypoint")
-    scatter([n for n in waypoints if graph.nodes[n]["is_interest"]], s=22, c="#f28e2b",
-            zorder=2, label="point of interest")
-    scatter([n for n in waypoints if graph.nodes[n].get("hops") == radius], s=60,
-            facecolors="none", edgecolors="black", zorder=3, label=f"{radius}-hop boundary")
-    scatter([n for n in graph if graph.nodes[n]["kind"] == "robot" and n != 0], s=90,
-            c="#4e79a7", marker="s", zorder=4, label="other robot")
+    scatter(
+        [n for n in waypoints if not graph.nodes[n]["is_interest"]],
+        s=12,
+        c="#bbbbbb",
+        zorder=1,
+        label="waypoint",
+    )
+    scatter(
+        [n for n in waypoints if graph.nodes[n]["is_interest"]],
+        s=22,
+        c="#f28e2b",
+        zorder=2,
+        label="point of interest",
+    )
+    scatter(
+        [n for n in waypoints if graph.nodes[n].get("hops") == radius],
+        s=60,
+        facecolors="none",
+        edgecolors="black",
+        zorder=3,
+        label=f"{radius}-hop boundary",
+    )
+    scatter(
+        [n for n in graph if graph.nodes[n]["kind"] == "robot" and n != 0],
+        s=90,
+        c="#4e79a7",
+        marker="s",
+        zorder=4,
+        label="other robot",
+    )
     scatter([0], s=250, c="#e15759", marker="*", zorder=5, label="ego robot")
     ax.legend(loc="upper right", fontsize=8)
     ax.set_aspect("equal")
     ax.autoscale_view()
-    ax.set_title(title or f"ego-graph: {graph.number_of_nodes()} nodes, "
-                 f"{graph.number_of_edges()} edges")
+    ax.set_title(
+        title or f"ego-graph: {graph.number_of_nodes()} nodes, {graph.number_of_edges()} edges"
+    )
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path)

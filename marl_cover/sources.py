@@ -124,9 +124,7 @@ def make_map_source(config: CoverageConfig) -> MapSource:
     elif config.map == "city":
         source = CityMap(CityConfig(num_waypoints=config.city_size))
     elif config.map == "paper":
-        source = WindowMap(
-            _cached_paper_graph(PAPER_PERIMETER), 1.0 / 3.0, config.min_window_nodes
-        )
+        source = WindowMap(_cached_paper_graph(PAPER_PERIMETER), 1.0 / 3.0, config.min_window_nodes)
     elif config.map == "paper_full":
         source = FixedMap(_cached_paper_graph(PAPER_PERIMETER))
     elif config.map == "paper_large":
@@ -144,7 +142,5 @@ def make_map_source(config: CoverageConfig) -> MapSource:
             source = WindowMap(graph, config.window_fraction, config.min_window_nodes)
     smallest = config.min_window_nodes if isinstance(source, WindowMap) else source.max_waypoints
     if smallest < config.num_robots:
-        raise ValueError(
-            f"{config.num_robots} robots do not fit on maps of {smallest} waypoints"
-        )
+        raise ValueError(f"{config.num_robots} robots do not fit on maps of {smallest} waypoints")
     return source

@@ -41,7 +41,9 @@ def bench(config: dict, seconds: float) -> dict:
     obs_bytes = observation_bytes(observations)
     # peak memory of one step (observations included), traced once outside the timing
     tracemalloc.start()
-    actions = {a: int(rng.choice(np.flatnonzero(o["action_mask"]))) for a, o in observations.items()}
+    actions = {
+        a: int(rng.choice(np.flatnonzero(o["action_mask"]))) for a, o in observations.items()
+    }
     env.step(actions)
     step_peak = tracemalloc.get_traced_memory()[1]
     tracemalloc.stop()
@@ -71,8 +73,10 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("outputs/bench_env.json"))
     args = parser.parse_args()
     results = {}
-    print(f"{'case':<38} {'env steps/s':>12} {'agent-steps/s':>14} {'obs MB/step':>12} "
-          f"{'step peak MB':>13} {'target':>8}")
+    print(
+        f"{'case':<38} {'env steps/s':>12} {'agent-steps/s':>14} {'obs MB/step':>12} "
+        f"{'step peak MB':>13} {'target':>8}"
+    )
     for name, config in CASES.items():
         try:
             result = bench(config, args.seconds)
@@ -81,9 +85,12 @@ def main() -> None:
             continue
         results[name] = result
         target = TARGETS.get(name[0])
-        print(f"{name:<38} {result['env_steps_per_s']:12.0f} {result['agent_steps_per_s']:14.0f} "
-              f"{result['observation_mb_per_step']:12.2f} {result['step_peak_mb']:13.2f} "
-              f"{(f'>= {target:.0f}' if target else '-'):>8}", flush=True)
+        print(
+            f"{name:<38} {result['env_steps_per_s']:12.0f} {result['agent_steps_per_s']:14.0f} "
+            f"{result['observation_mb_per_step']:12.2f} {result['step_peak_mb']:13.2f} "
+            f"{(f'>= {target:.0f}' if target else '-'):>8}",
+            flush=True,
+        )
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(results, indent=2))
     print(f"wrote {args.out}")

@@ -1,6 +1,6 @@
 """Demo: greedy robots on fresh procedural cities; prints a table and writes a picture.
 
-    python scripts/demo.py [--episodes 10] [--robots 4] [--hops 19] [--out outputs/demo]
+python scripts/demo.py [--episodes 10] [--robots 4] [--hops 19] [--out outputs/demo]
 """
 
 from __future__ import annotations
@@ -30,13 +30,20 @@ def main() -> None:
         "greedy (each robot on its ego-graph)": GreedyPolicy(args.hops, fallback="random"),
         "greedy (centralized, on state())": CentralizedGreedyPolicy(args.hops, fallback="random"),
     }
-    print(f"{args.robots} robots, K = {args.hops}, T = {env.config.max_steps}, "
-          f"{args.episodes} procedural cities of {args.city_size} waypoints (seeds 0..{args.episodes - 1})")
-    print(f"{'policy':<38} {'reward':>15} {'coverage':>9} {'policy ms/step':>15} {'env ms/step':>12}")
+    print(
+        f"{args.robots} robots, K = {args.hops}, T = {env.config.max_steps}, "
+        f"{args.episodes} procedural cities of {args.city_size} waypoints "
+        f"(seeds 0..{args.episodes - 1})"
+    )
+    print(
+        f"{'policy':<38} {'reward':>15} {'coverage':>9} {'policy ms/step':>15} {'env ms/step':>12}"
+    )
     for name, policy in policies.items():
         s = evaluate(env, policy, seeds)
-        print(f"{name:<38} {s.mean:7.1f} +- {s.sem:4.1f} {100 * s.mean_coverage:8.1f}% "
-              f"{s.controller_ms_per_step:15.2f} {s.env_ms_per_step:12.2f}")
+        print(
+            f"{name:<38} {s.mean:7.1f} +- {s.sem:4.1f} {100 * s.mean_coverage:8.1f}% "
+            f"{s.controller_ms_per_step:15.2f} {s.env_ms_per_step:12.2f}"
+        )
 
     # one episode drawn: the map, points of interest (orange; green once covered), trails
     import matplotlib
@@ -44,8 +51,9 @@ def main() -> None:
     matplotlib.use("Agg")
     from PIL import Image
 
-    env = parallel_env(num_robots=args.robots, hops=args.hops, city_size=args.city_size,
-                       render_mode="rgb_array")
+    env = parallel_env(
+        num_robots=args.robots, hops=args.hops, city_size=args.city_size, render_mode="rgb_array"
+    )
     policy = GreedyPolicy(args.hops, fallback="random", seed=0)
     obs, _ = env.reset(seed=0)
     while env.agents:

@@ -1,7 +1,7 @@
 """Inspect one robot's ego-graph: print its size and draw it to a PNG.
 
-    python scripts/inspect_ego.py [--map city|paper|paper_large|PATH] [--hops 19] [--robots 4]
-                                  [--robot 0] [--seed 0] [--steps 0] [--out outputs/ego.png]
+python scripts/inspect_ego.py [--map city|paper|paper_large|PATH] [--hops 19] [--robots 4]
+                              [--robot 0] [--seed 0] [--steps 0] [--out outputs/ego.png]
 """
 
 from __future__ import annotations
@@ -39,13 +39,19 @@ def main() -> None:
     agent = env.possible_agents[args.robot]
     graph = ego_to_networkx(obs[agent])
     kinds = [k for _, k in graph.nodes(data="kind")]
-    print(f"{agent}: {graph.number_of_nodes()} nodes ({kinds.count('robot')} robots, "
-          f"{kinds.count('waypoint')} waypoints, "
-          f"{sum(1 for _, f in graph.nodes(data='is_interest') if f)} of interest), "
-          f"{graph.number_of_edges()} undirected edges, padded to "
-          f"{obs[agent]['nodes'].shape[0]} nodes / {obs[agent]['edge_index'].shape[1]} edges")
-    path = draw_ego(obs[agent], args.out, hops=args.hops,
-                    title=f"{agent}, K = {args.hops}, map {args.map}, seed {args.seed}")
+    print(
+        f"{agent}: {graph.number_of_nodes()} nodes ({kinds.count('robot')} robots, "
+        f"{kinds.count('waypoint')} waypoints, "
+        f"{sum(1 for _, f in graph.nodes(data='is_interest') if f)} of interest), "
+        f"{graph.number_of_edges()} undirected edges, padded to "
+        f"{obs[agent]['nodes'].shape[0]} nodes / {obs[agent]['edge_index'].shape[1]} edges"
+    )
+    path = draw_ego(
+        obs[agent],
+        args.out,
+        hops=args.hops,
+        title=f"{agent}, K = {args.hops}, map {args.map}, seed {args.seed}",
+    )
     print(f"wrote {path}")
 
 

@@ -24,7 +24,9 @@ from agents.greedy import GreedyPolicy  # noqa: E402
 from marl_cover import parallel_env  # noqa: E402
 
 HOPS = list(range(3, 20, 2))
-PAPER_CSV = Path(__file__).resolve().parent.parent.parent / "shared" / "reference" / "paper_results.csv"
+PAPER_CSV = (
+    Path(__file__).resolve().parent.parent.parent / "shared" / "reference" / "paper_results.csv"
+)
 
 
 def paper_numbers(path: Path, task: str, method: str) -> dict[int, tuple[float, float]]:
@@ -33,7 +35,10 @@ def paper_numbers(path: Path, task: str, method: str) -> dict[int, tuple[float, 
         return {}
     with path.open() as handle:
         return {
-            int(row["x"]): (float(row["mean_reward"]), float(row["std_reward"]) / float(row["episodes"]) ** 0.5)
+            int(row["x"]): (
+                float(row["mean_reward"]),
+                float(row["std_reward"]) / float(row["episodes"]) ** 0.5,
+            )
             for row in csv.DictReader(handle)
             if row["task"] == task and row["method"] == method
         }
@@ -56,7 +61,10 @@ def main() -> None:
     seeds = range(args.seed, args.seed + args.episodes)
     paper = paper_numbers(PAPER_CSV, "coverage", "greedy")
     rows = []
-    print(f"greedy, 4 robots, paper windows, {args.episodes} episodes (seeds {seeds.start}..{seeds.stop - 1})")
+    print(
+        f"greedy, 4 robots, paper windows, {args.episodes} episodes "
+        f"(seeds {seeds.start}..{seeds.stop - 1})"
+    )
     print(f"{'K':>3} {'ours T=50':>14} {'ours T=49':>14} {'paper (T=49)':>14}")
     for hops in HOPS:
         row = {"hops": hops}
@@ -67,8 +75,10 @@ def main() -> None:
         if hops in paper:
             row["paper"] = {"mean": paper[hops][0], "sem": paper[hops][1]}
         rows.append(row)
-        cells = [f"{row[k]['mean']:6.1f} +- {row[k]['sem']:4.2f}" if k in row else f"{'-':>14}"
-                 for k in ("T50", "T49", "paper")]
+        cells = [
+            f"{row[k]['mean']:6.1f} +- {row[k]['sem']:4.2f}" if k in row else f"{'-':>14}"
+            for k in ("T50", "T49", "paper")
+        ]
         print(f"{hops:>3} " + " ".join(f"{c:>14}" for c in cells), flush=True)
     write_json(args.out / "greedy_coverage.json", rows)
     plot(rows, args.out / "greedy_coverage.png")
@@ -82,8 +92,11 @@ def plot(rows: list[dict], path: Path) -> None:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6, 4), dpi=120)
-    for key, label, style in (("T50", "greedy, ours (T=50)", "o-"), ("T49", "greedy, ours (T=49)", "s-"),
-                              ("paper", "greedy, paper", "k^--")):
+    for key, label, style in (
+        ("T50", "greedy, ours (T=50)", "o-"),
+        ("T49", "greedy, ours (T=49)", "s-"),
+        ("paper", "greedy, paper", "k^--"),
+    ):
         points = [(r["hops"], r[key]["mean"], r[key]["sem"]) for r in rows if key in r]
         if points:
             x, y, e = zip(*points, strict=True)

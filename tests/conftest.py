@@ -20,11 +20,11 @@ except ImportError:  # torch is an optional extra
 def tee_graph() -> SpatialGraph:
     """Six waypoints, cell size 1::
 
-        5
-        |
-        4
-        |
-        0 - 1 - 2 - 3
+    5
+    |
+    4
+    |
+    0 - 1 - 2 - 3
     """
     positions = [(0, 0), (1, 0), (2, 0), (3, 0), (1, 1), (1, 2)]
     edges = [(0, 1), (1, 2), (2, 3), (1, 4), (4, 5)]

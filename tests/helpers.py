@@ -7,7 +7,9 @@ import numpy as np
 from marl_cover.graph import SpatialGraph
 
 
-def random_grid_graph(rng: np.random.Generator, rows: int, cols: int, density: float) -> SpatialGraph:
+def random_grid_graph(
+    rng: np.random.Generator, rows: int, cols: int, density: float
+) -> SpatialGraph:
     """The largest component of a random set of grid cells."""
     from marl_cover.maps import graph_from_occupancy
 

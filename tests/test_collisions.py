@@ -51,7 +51,9 @@ def scenarios(draw):  # noqa: ANN201
     num_nodes = draw(st.integers(1, 12))
     num_robots = draw(st.integers(0, num_nodes))
     current = draw(st.permutations(range(num_nodes)))[:num_robots]
-    targets = draw(st.lists(st.integers(0, num_nodes - 1), min_size=num_robots, max_size=num_robots))
+    targets = draw(
+        st.lists(st.integers(0, num_nodes - 1), min_size=num_robots, max_size=num_robots)
+    )
     return np.array(current, dtype=np.int64), np.array(targets, dtype=np.int64), draw(st.booleans())
 
 

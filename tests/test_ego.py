@@ -36,7 +36,9 @@ def named_ego(obs: dict[str, np.ndarray], snap, ego: int) -> nx.Graph:
     cells = snap.graph.positions / snap.graph.cell_size
     names = {0: ("r", ego)}
     for local in range(1, 1 + num_waypoints):  # waypoints in increasing map index
-        w = int(np.flatnonzero(np.all(np.isclose(cells - origin, obs["node_pos"][local]), axis=1))[0])
+        w = int(
+            np.flatnonzero(np.all(np.isclose(cells - origin, obs["node_pos"][local]), axis=1))[0]
+        )
         names[local] = ("w", w)
     others = [j for j in range(len(snap.robot_node)) if j != ego]
     robot_locals = range(1 + num_waypoints, count)
@@ -98,3 +100,22 @@ def test_k_layers_on_ego_graph_equal_k_layers_on_the_state(hops: int) -> None:
         o = obs[agent]
         ego = mean_message_passing(o["nodes"], o["edge_index"], o["edge_mask"], weights)
         np.testing.assert_allclose(ego[0], whole[state["robot_nodes"][j]], atol=1e-9)
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_numba_and_numpy_backends_agree(seed: int) -> None:
+    pytest.importorskip("numba")
+    from marl_cover.ego import build_ego_graphs
+
+    rng = np.random.default_rng(100 + seed)
+    graph = random_grid_graph(rng, 15, 15, 0.8)
+    hops = int(rng.integers(1, 9))
+    env = marl_cover.parallel_env(graph=graph, num_robots=int(rng.integers(1, 9)), hops=hops)
+    env.reset(seed=seed)
+    for _ in range(4):
+        args = (env._graph, env.snapshot().robot_node, env._waypoint_features, hops, env._ego_shape)
+        fast, reference = build_ego_graphs(*args, "numba"), build_ego_graphs(*args, "numpy")
+        for key, value in reference.items():
+            assert fast[key].dtype == value.dtype, key
+            np.testing.assert_array_equal(fast[key], value, err_msg=key)
+        env.step({a: int(rng.integers(NUM_ACTIONS)) for a in env.agents})

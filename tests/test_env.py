@@ -40,12 +40,28 @@ def test_ego_graph_exact(tee_graph: SpatialGraph) -> None:
     assert o["action_mask"].tolist() == [1, 1, 0, 0, 0]
     sink = m - 1
     assert o["edge_index"][:, :10].T.tolist() == [
-        [1, 0], [2, 0], [sink, sink], [sink, sink], [sink, sink],
-        [0, 1], [0, 2], [sink, sink], [sink, sink], [sink, sink],
+        [1, 0],
+        [2, 0],
+        [sink, sink],
+        [sink, sink],
+        [sink, sink],
+        [0, 1],
+        [0, 2],
+        [sink, sink],
+        [sink, sink],
+        [sink, sink],
     ]
     assert real_edges(o) == [
-        (1, 0), (2, 0), (0, 1), (0, 2),
-        (1, 2), (2, 3), (2, 4), (2, 1), (3, 2), (4, 2),
+        (1, 0),
+        (2, 0),
+        (0, 1),
+        (0, 2),
+        (1, 2),
+        (2, 3),
+        (2, 4),
+        (2, 1),
+        (3, 2),
+        (4, 2),
     ]
     assert o["edge_attr"][o["edge_mask"], 0].tolist() == [0, 1, 0, 1, 1, 1, 1, 1, 1, 1]
     assert env.observation_space("robot_0").contains(o)
@@ -70,13 +86,16 @@ def test_hops_one_has_no_other_robots(tee_graph: SpatialGraph) -> None:
     _, obs, _ = make(tee_graph, [1, 2], [5], hops=1)
     o = obs["robot_0"]
     assert o["node_mask"].sum() == 1 + 4  # waypoints 0, 1, 2, 4; robot_1 is two hops away
-    assert o["nodes"][: 5, 0].tolist() == [1, 0, 0, 0, 0]
+    assert o["nodes"][:5, 0].tolist() == [1, 0, 0, 0, 0]
 
 
 def test_rewards_infos_and_termination(path_graph: SpatialGraph) -> None:
     env, obs, infos = make(path_graph, [0, 7], [1, 2, 6], max_steps=10)
     assert infos["robot_0"] == {
-        "new_interest": 0, "total_interest": 0, "blocked": False, "invalid_action": False
+        "new_interest": 0,
+        "total_interest": 0,
+        "blocked": False,
+        "invalid_action": False,
     }
     east, west = 1, 3
     obs, rew, term, trunc, infos = env.step({"robot_0": east, "robot_1": west})
@@ -218,14 +237,28 @@ def test_state_encodes_the_whole_graph(tee_graph: SpatialGraph) -> None:
     assert state["robot_nodes"].tolist() == [0, 1]
     assert state["node_mask"].sum() == 2 + 6
     assert state["nodes"][:8, :3].tolist() == [
-        [1, 0, 0], [1, 0, 0],
-        [0, 1, 0], [0, 1, 0], [0, 1, 0], [0, 1, 0], [0, 1, 0], [0, 1, 1],
+        [1, 0, 0],
+        [1, 0, 0],
+        [0, 1, 0],
+        [0, 1, 0],
+        [0, 1, 0],
+        [0, 1, 0],
+        [0, 1, 0],
+        [0, 1, 1],
     ]
     sink = state["nodes"].shape[0] - 1
     # action edges in: robot r slot k at 5 r + k; waypoint w is node 2 + w
     assert state["edge_index"][:, :10].T.tolist() == [
-        [2, 0], [3, 0], [sink, sink], [sink, sink], [sink, sink],
-        [4, 1], [5, 1], [sink, sink], [3, 1], [sink, sink],
+        [2, 0],
+        [3, 0],
+        [sink, sink],
+        [sink, sink],
+        [sink, sink],
+        [4, 1],
+        [5, 1],
+        [sink, sink],
+        [3, 1],
+        [sink, sink],
     ]
     assert state["action_mask"].tolist() == [[1, 1, 0, 0, 0], [1, 1, 0, 1, 0]]
     assert state["edge_mask"].sum() == 2 * (2 + 3) + tee_graph.num_edges
