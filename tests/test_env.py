@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import random_grid_graph
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import marl_cover
 from marl_cover.config import CoverageConfig
@@ -222,7 +225,7 @@ def assert_same(a, b) -> None:
 def test_same_seed_same_episode_over_100_steps(map_name: str, request) -> None:
     if map_name == "paper":
         request.getfixturevalue("paper_map_available")
-    config = {"map": map_name, "hops": 5, "max_steps": 30}
+    config = {"map": map_name, "hops": 5, "max_steps": 100}
     first = run_episode(marl_cover.parallel_env(**config), 11, 100, 3)
     second = run_episode(marl_cover.parallel_env(**config), 11, 100, 3)
     assert_same(first, second)
@@ -272,3 +275,34 @@ def test_registered_ids() -> None:
     aec = pettingzoo.make("aec", "marl_cover/Coverage-v0", num_robots=2, hops=3)
     aec.reset(seed=0)
     assert aec.agent_selection == "robot_0"
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    seed=st.integers(0, 10_000),
+    num_robots=st.integers(1, 12),
+    allow_swaps=st.booleans(),
+    actions=st.lists(
+        st.lists(st.integers(0, 4), min_size=12, max_size=12), min_size=1, max_size=15
+    ),
+)
+def test_robots_never_share_a_waypoint(seed, num_robots, allow_swaps, actions) -> None:
+    graph = random_grid_graph(np.random.default_rng(seed), 6, 7, 0.85)
+    num_robots = min(num_robots, graph.num_nodes)
+    env = marl_cover.parallel_env(
+        graph=graph, num_robots=num_robots, hops=3, allow_swaps=allow_swaps
+    )
+    env.reset(seed=seed)
+    for row in actions:
+        before = env.snapshot().robot_node
+        _, _, _, _, infos = env.step({a: row[i] for i, a in enumerate(env.possible_agents)})
+        after = env.snapshot().robot_node
+        assert len(np.unique(after)) == num_robots
+        # a robot that moved went along one edge, and a blocked robot stayed
+        for i in np.flatnonzero(after != before):
+            assert after[i] in graph.neighbors[before[i]]
+        for i, agent in enumerate(env.possible_agents):
+            if infos[agent]["blocked"]:
+                assert after[i] == before[i]
+        if not env.agents:
+            break
