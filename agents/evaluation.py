@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections import Counter
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any, Protocol
@@ -29,6 +30,8 @@ class Policy(Protocol):
 
 def decide(policy: Any, observations: dict[str, Any], env: CoverageEnv) -> dict[str, int]:
     """The policy's actions for the current step (centralized policies read ``env.state()``)."""
+    if hasattr(policy, "act_env"):
+        return policy.act_env(env)
     if hasattr(policy, "act_state"):
         actions = policy.act_state(env.state())
         return dict(zip(env.possible_agents, np.asarray(actions).tolist(), strict=True))
@@ -45,6 +48,7 @@ class EpisodeResult:
     steps: int
     controller_seconds: float
     env_seconds: float
+    policy_counts: dict[str, int] = field(default_factory=dict)  # e.g. an expert's fallbacks
 
 
 @dataclass
@@ -60,6 +64,7 @@ class Summary:
     mean_coverage: float
     controller_ms_per_step: float
     env_ms_per_step: float
+    policy_counts: dict[str, int] = field(default_factory=dict)
     results: list[EpisodeResult] = field(default_factory=list, repr=False)
 
     def as_dict(self) -> dict[str, Any]:
@@ -87,6 +92,7 @@ def summarize(results: Sequence[EpisodeResult]) -> Summary:
         mean_coverage=float(np.mean([r.coverage for r in results])) if n else math.nan,
         controller_ms_per_step=1e3 * sum(r.controller_seconds for r in results) / steps,
         env_ms_per_step=1e3 * sum(r.env_seconds for r in results) / steps,
+        policy_counts=dict(sum((Counter(r.policy_counts) for r in results), Counter())),
         results=list(results),
     )
 
@@ -118,6 +124,7 @@ def run_episode(env: CoverageEnv, policy: Any, seed: int) -> EpisodeResult:
         steps=steps,
         controller_seconds=controller_seconds,
         env_seconds=env_seconds,
+        policy_counts=dict(getattr(policy, "counts", {})),
     )
 
 

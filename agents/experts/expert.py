@@ -1,0 +1,179 @@
+"""The routing expert: plans prize-collecting routes and follows them one hop at a time.
+
+Modes:
+
+- ``"open_loop"``: plan once over the steps left in the episode and follow the routes. The
+  plan is redone when it can no longer be followed: a robot is not where the plan expected
+  (the collision resolver blocked it) or a robot can no longer reach its remaining stops in
+  the steps left.
+- ``"receding"``: plan every step over ``horizon`` steps (the paper's K) and take the first
+  hop of each route.
+
+Fallback (it never crashes an episode): a robot whose route is empty (nothing in reach, an
+empty, failed or infeasible solve) takes the greedy action toward the nearest unvisited point
+of interest within ``horizon`` hops (or anywhere, in open loop), staying if there is none. Each
+step's fallbacks and re-plans are in :attr:`RoutingExpert.info`; totals in
+:attr:`RoutingExpert.counts`.
+
+The expert reads only :meth:`marl_cover.env.CoverageEnv.snapshot`, never the env's private
+state.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import Counter
+from typing import Any
+
+import numpy as np
+
+from agents.experts.backends import BACKENDS, solve
+from agents.experts.problem import RoutingProblem, build_problem
+from marl_cover.env import CoverageSnapshot
+from marl_cover.graph import SpatialGraph
+
+MODES = ("open_loop", "receding")
+
+
+def step_toward(graph: SpatialGraph, robot_node: np.ndarray, goals: np.ndarray) -> np.ndarray:
+    """Action of each robot for one hop along a shortest path to its goal (``-1``: stay).
+
+    Ties go to the lowest action slot (east, north, west, south).
+    """
+    actions = np.zeros(len(robot_node), dtype=np.int64)
+    moving = np.flatnonzero((goals >= 0) & (goals != robot_node))
+    if len(moving) == 0:
+        return actions
+    dist = graph.hop_distances(goals[moving])  # (M, N)
+    nbr = graph.neighbors[robot_node[moving]]  # (M, 4)
+    d = np.where(nbr >= 0, dist[np.arange(len(moving))[:, None], nbr.clip(min=0)], np.inf)
+    best = np.argmin(d, axis=1)
+    ok = np.isfinite(d[np.arange(len(moving)), best])
+    actions[moving[ok]] = best[ok] + 1
+    return actions
+
+
+def greedy_goals(snapshot: CoverageSnapshot, robots: np.ndarray, limit: float) -> np.ndarray:
+    """Nearest unvisited point of interest of each listed robot within ``limit`` hops (-1)."""
+    goals = np.full(len(robots), -1, dtype=np.int64)
+    targets = np.flatnonzero(snapshot.unvisited_interest)
+    if len(robots) == 0 or len(targets) == 0:
+        return goals
+    dist = snapshot.graph.hop_distances(snapshot.robot_node[robots], limit=limit)[:, targets]
+    best = np.argmin(dist, axis=1)  # lowest map index among the nearest
+    found = np.isfinite(dist[np.arange(len(robots)), best])
+    goals[found] = targets[best[found]]
+    return goals
+
+
+class RoutingExpert:
+    """A routing expert policy over a coverage environment's snapshot.
+
+    Args:
+        backend: ``"pyvrp"`` or ``"ortools"``.
+        mode: ``"open_loop"`` or ``"receding"``.
+        horizon: Planning horizon in steps for ``"receding"`` (the paper's K), and the greedy
+            fallback's reach in both modes (``None``: unlimited).
+        time_limit: Seconds per solve.
+        seed: Solver seed (PyVRP).
+    """
+
+    def __init__(
+        self,
+        backend: str = "pyvrp",
+        mode: str = "open_loop",
+        horizon: int | None = None,
+        time_limit: float = 1.0,
+        seed: int = 0,
+    ) -> None:
+        if backend not in BACKENDS:
+            raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
+        if mode not in MODES:
+            raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
+        if mode == "receding" and (horizon is None or horizon < 1):
+            raise ValueError("mode 'receding' needs a horizon >= 1")
+        if time_limit < 0:
+            raise ValueError(f"time_limit must be >= 0, got {time_limit}")
+        self.backend = backend
+        self.mode = mode
+        self.horizon = horizon
+        self.time_limit = time_limit
+        self.seed = seed
+        self.counts: Counter[str] = Counter()
+        self.info: dict[str, Any] = {}
+        self.reset()
+
+    def reset(self, seed: int | None = None) -> None:
+        """Forgets the plan (call at each episode start); ``seed`` re-seeds the solver."""
+        if seed is not None:
+            self.seed = seed
+        self._routes: list[list[int]] | None = None  # waypoint stops per robot
+        self._expected: np.ndarray | None = None
+        self.counts = Counter()
+
+    # ------------------------------------------------------------------ planning
+    def plan(self, snapshot: CoverageSnapshot) -> list[list[int]]:
+        """Solves the routing problem of ``snapshot``; waypoint stops per robot.
+
+        A solve that fails or returns an infeasible plan gives empty routes (counted as
+        ``"failed_solve"``).
+        """
+        horizon = self.horizon if self.mode == "receding" else None
+        problem = build_problem(snapshot, horizon)
+        start = time.perf_counter()
+        try:
+            routes = solve(problem, self.backend, self.time_limit, self.seed)
+        except Exception:  # noqa: BLE001 (any solver failure falls back to greedy)
+            routes = [[] for _ in range(problem.num_robots)]
+            self.counts["failed_solve"] += 1
+        self.counts["solves"] += 1
+        self.counts["solve_ms"] += int(1000 * (time.perf_counter() - start))
+        if not problem.is_feasible(routes):
+            self.counts["failed_solve"] += 1
+            routes = [[] for _ in range(problem.num_robots)]
+        return self._to_waypoints(problem, routes)
+
+    @staticmethod
+    def _to_waypoints(problem: RoutingProblem, routes: list[list[int]]) -> list[list[int]]:
+        return [[int(problem.candidates[k]) for k in route] for route in routes]
+
+    def _needs_replan(self, snapshot: CoverageSnapshot) -> bool:
+        """A plan stays feasible while every robot moves as planned: each step shortens every
+        route by one hop (dropping stops others visited only shortens it further). A robot
+        that is not where the plan expected (blocked) makes it stale."""
+        return (
+            self._routes is None
+            or self._expected is None
+            or not np.array_equal(self._expected, snapshot.robot_node)
+        )
+
+    # ------------------------------------------------------------------ acting
+    def act_snapshot(self, snapshot: CoverageSnapshot) -> np.ndarray:
+        """Actions ``(R,)`` for the current snapshot."""
+        replanned = False
+        if self._routes is not None:  # drop stops visited since (by anyone)
+            self._routes = [[s for s in route if not snapshot.visited[s]] for route in self._routes]
+        if self.mode == "receding" or self._needs_replan(snapshot):
+            self._routes = self.plan(snapshot)
+            replanned = True
+            if self.mode == "open_loop" and self._expected is not None:
+                self.counts["replans"] += 1
+        goals = np.array([route[0] if route else -1 for route in self._routes], dtype=np.int64)
+        fallback = np.flatnonzero(goals < 0)
+        limit = np.inf if self.horizon is None else self.horizon
+        goals[fallback] = greedy_goals(snapshot, fallback, limit)
+        actions = step_toward(snapshot.graph, snapshot.robot_node, goals)
+        self.counts["fallback_steps"] += len(fallback)
+        self.info = {"fallback": len(fallback), "replanned": replanned}
+        targets = np.where(
+            actions > 0,
+            snapshot.graph.neighbors[snapshot.robot_node, (actions - 1).clip(min=0)],
+            snapshot.robot_node,
+        )
+        self._expected = targets
+        return actions
+
+    def act_env(self, env: Any) -> dict[str, int]:
+        """Actions keyed by agent name, from ``env.snapshot()``."""
+        actions = self.act_snapshot(env.snapshot())
+        return dict(zip(env.possible_agents, actions.tolist(), strict=True))

@@ -1,0 +1,78 @@
+"""The prize-collecting routing problem behind the routing expert.
+
+Each robot starts at its own waypoint; routes are open (they end anywhere); each robot's route
+is at most ``budget[r]`` hops long; every unvisited point of interest within reach carries one
+prize. Maximising the prizes collected (and, second, minimising hops) is the coverage problem
+with collisions ignored. Hop distances come from breadth-first searches from the robots and the
+candidate points only, truncated at the largest budget: never an all-pairs map matrix.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from marl_cover.env import CoverageSnapshot
+
+#: Stand-in for "unreachable within the budget" in integer distance matrices.
+UNREACHABLE = 1_000_000
+
+
+@dataclass(frozen=True)
+class RoutingProblem:
+    """Locations ``0..R-1`` are the robots' waypoints, ``R..R+C-1`` the candidate points.
+
+    Attributes:
+        robot_node: ``(R,)`` waypoint of each robot.
+        candidates: ``(C,)`` waypoints of the candidate points of interest.
+        distance: ``(R + C, R + C)`` int64 hop distances, :data:`UNREACHABLE` beyond the budget.
+        budget: ``(R,)`` most hops each robot may travel.
+    """
+
+    robot_node: np.ndarray
+    candidates: np.ndarray
+    distance: np.ndarray
+    budget: np.ndarray
+
+    @property
+    def num_robots(self) -> int:
+        return len(self.robot_node)
+
+    @property
+    def num_candidates(self) -> int:
+        return len(self.candidates)
+
+    def route_length(self, robot: int, stops: list[int]) -> int:
+        """Hops of robot ``robot`` visiting candidate indices ``stops`` in order."""
+        path = [robot] + [self.num_robots + s for s in stops]
+        return int(sum(self.distance[a, b] for a, b in zip(path[:-1], path[1:], strict=True)))
+
+    def is_feasible(self, routes: list[list[int]]) -> bool:
+        """Whether candidate-index routes respect the budgets and visit each point once."""
+        flat = [s for route in routes for s in route]
+        if len(flat) != len(set(flat)):
+            return False
+        return all(self.route_length(r, route) <= self.budget[r] for r, route in enumerate(routes))
+
+
+def build_problem(snapshot: CoverageSnapshot, horizon: int | None = None) -> RoutingProblem:
+    """The routing problem of the current state.
+
+    Args:
+        snapshot: The environment's public snapshot.
+        horizon: Plan over at most this many steps (receding horizon); ``None`` plans over the
+            steps left in the episode (open loop).
+    """
+    steps_left = snapshot.max_steps - snapshot.num_steps
+    limit = steps_left if horizon is None else min(horizon, steps_left)
+    robots = snapshot.robot_node
+    budget = np.full(len(robots), limit, dtype=np.int64)
+    graph = snapshot.graph
+    from_robots = graph.hop_distances(robots, limit=limit)  # (R, N)
+    reachable = np.flatnonzero(snapshot.unvisited_interest & (from_robots.min(axis=0) <= limit))
+    from_points = graph.hop_distances(reachable, limit=limit)  # (C, N)
+    locations = np.concatenate([robots, reachable])
+    full = np.concatenate([from_robots, from_points])[:, locations]
+    distance = np.where(np.isfinite(full), full, UNREACHABLE).astype(np.int64)
+    return RoutingProblem(robots.copy(), reachable, distance, budget)
