@@ -15,16 +15,16 @@ Maps: ``city`` (default), ``paper`` (windows of the paper's map), ``paper_full``
 from __future__ import annotations
 
 import csv
+import io
 import json
-import os
 import sys
-import tempfile
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from agents.cli import parse_value, write_text_atomic  # noqa: E402
 from agents.evaluation import evaluate  # noqa: E402
 from marl_cover import CoverageConfig, parallel_env  # noqa: E402
 
@@ -46,21 +46,6 @@ class EvaluateOptions:
     seed: int = 0
     out: str = "outputs/evaluate.json"
     fallback: str = "random"  # greedy's choice when nothing is in reach
-
-
-def parse_value(text: str) -> Any:
-    """``true``/``false``/``none``, numbers, else the string."""
-    lowered = text.lower()
-    if lowered in ("true", "false"):
-        return lowered == "true"
-    if lowered in ("none", "null"):
-        return None
-    for cast in (int, float):
-        try:
-            return cast(text)
-        except ValueError:
-            pass
-    return text
 
 
 def parse_overrides(argv: list[str]) -> tuple[EvaluateOptions, ExpertOptions, dict[str, Any]]:
@@ -119,13 +104,6 @@ def make_policy(options: EvaluateOptions, expert: ExpertOptions, hops: int) -> A
     )
 
 
-def write_atomic(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.NamedTemporaryFile("w", dir=path.parent, delete=False, suffix=".tmp") as f:
-        f.write(text)
-    os.replace(f.name, path)
-
-
 def main(argv: list[str]) -> None:
     options, expert, env_overrides = parse_overrides(argv)
     env = parallel_env(**env_overrides)
@@ -146,15 +124,13 @@ def main(argv: list[str]) -> None:
         "summary": summary.as_dict(),
     }
     out = Path(options.out)
-    write_atomic(out, json.dumps(record, indent=2))
+    write_text_atomic(out, json.dumps(record, indent=2))
     rows = [asdict(r) for r in summary.results]
-    with tempfile.NamedTemporaryFile(
-        "w", dir=out.parent, delete=False, suffix=".tmp", newline=""
-    ) as f:
-        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
-    os.replace(f.name, out.with_suffix(".csv"))
+    table = io.StringIO()
+    writer = csv.DictWriter(table, fieldnames=list(rows[0]))
+    writer.writeheader()
+    writer.writerows(rows)
+    write_text_atomic(out.with_suffix(".csv"), table.getvalue())
     print(
         f"{options.policy} on {env.config.map}, {summary.episodes} episodes "
         f"(seeds {seeds.start}..{seeds.stop - 1}): reward {summary.mean:.2f} +- "

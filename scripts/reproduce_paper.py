@@ -12,13 +12,12 @@ from __future__ import annotations
 import argparse
 import csv
 import json
-import os
 import sys
-import tempfile
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from agents.cli import write_text_atomic  # noqa: E402
 from agents.evaluation import evaluate  # noqa: E402
 from agents.greedy import GreedyPolicy  # noqa: E402
 from marl_cover import parallel_env  # noqa: E402
@@ -42,14 +41,6 @@ def paper_numbers(path: Path, task: str, method: str) -> dict[int, tuple[float, 
             for row in csv.DictReader(handle)
             if row["task"] == task and row["method"] == method
         }
-
-
-def write_json(path: Path, data: object) -> None:
-    """Writes JSON atomically (temporary file, then rename)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.NamedTemporaryFile("w", dir=path.parent, delete=False, suffix=".tmp") as handle:
-        json.dump(data, handle, indent=2)
-    os.replace(handle.name, path)
 
 
 def main() -> None:
@@ -80,7 +71,7 @@ def main() -> None:
             for k in ("T50", "T49", "paper")
         ]
         print(f"{hops:>3} " + " ".join(f"{c:>14}" for c in cells), flush=True)
-    write_json(args.out / "greedy_coverage.json", rows)
+    write_text_atomic(args.out / "greedy_coverage.json", json.dumps(rows, indent=2))
     plot(rows, args.out / "greedy_coverage.png")
     print(f"wrote {args.out}/greedy_coverage.json and .png")
 

@@ -17,9 +17,16 @@ BACKENDS = ("pyvrp", "ortools")
 
 
 def solve(
-    problem: RoutingProblem, backend: str, time_limit: float, seed: int = 0
+    problem: RoutingProblem,
+    backend: str,
+    time_limit: float,
+    seed: int = 0,
+    max_iterations: int | None = None,
 ) -> list[list[int]]:
     """Routes (candidate indices per robot) from the named backend.
+
+    With ``max_iterations`` the search stops after that many iterations (PyVRP) or solutions
+    (OR-Tools) instead of after ``time_limit``, which makes it deterministic for a seed.
 
     Raises:
         ValueError: an unknown backend name.
@@ -27,13 +34,15 @@ def solve(
     if problem.num_candidates == 0:
         return [[] for _ in range(problem.num_robots)]
     if backend == "pyvrp":
-        return solve_pyvrp(problem, time_limit, seed)
+        return solve_pyvrp(problem, time_limit, seed, max_iterations)
     if backend == "ortools":
-        return solve_ortools(problem, time_limit)
+        return solve_ortools(problem, time_limit, max_iterations)
     raise ValueError(f"unknown routing backend {backend!r}; choose one of {BACKENDS}")
 
 
-def solve_ortools(problem: RoutingProblem, time_limit: float) -> list[list[int]]:
+def solve_ortools(
+    problem: RoutingProblem, time_limit: float, max_solutions: int | None = None
+) -> list[list[int]]:
     """The paper's formulation, with per-robot start nodes instead of a dummy depot.
 
     Open routes end at a dummy location reached at no cost; a hop budget is a "Time"
@@ -63,7 +72,10 @@ def solve_ortools(problem: RoutingProblem, time_limit: float) -> list[list[int]]
     params.local_search_metaheuristic = (
         routing_enums_pb2.LocalSearchMetaheuristic.GUIDED_LOCAL_SEARCH
     )
-    params.time_limit.FromMilliseconds(max(1, int(1000 * time_limit)))
+    if max_solutions is None:
+        params.time_limit.FromMilliseconds(max(1, int(1000 * time_limit)))
+    else:
+        params.solution_limit = max_solutions
     solution = routing.SolveWithParameters(params)
     routes: list[list[int]] = [[] for _ in range(r)]
     if solution is None:
@@ -76,11 +88,16 @@ def solve_ortools(problem: RoutingProblem, time_limit: float) -> list[list[int]]
     return routes
 
 
-def solve_pyvrp(problem: RoutingProblem, time_limit: float, seed: int = 0) -> list[list[int]]:
+def solve_pyvrp(
+    problem: RoutingProblem,
+    time_limit: float,
+    seed: int = 0,
+    max_iterations: int | None = None,
+) -> list[list[int]]:
     """Prize-collecting VRP in PyVRP: one start depot per robot, a shared free end depot,
     optional clients with prizes, a maximum route distance per robot."""
     import pyvrp
-    from pyvrp.stop import MaxRuntime
+    from pyvrp.stop import MaxIterations, MaxRuntime
 
     r, c = problem.num_robots, problem.num_candidates
     # locations: robot starts 0..r-1, end depot r, clients r+1..r+c
@@ -103,7 +120,8 @@ def solve_pyvrp(problem: RoutingProblem, time_limit: float, seed: int = 0) -> li
     data = pyvrp.ProblemData(
         locations, clients, depots, vehicles, [matrix], [np.zeros_like(matrix)]
     )
-    result = pyvrp.solve(data, MaxRuntime(time_limit), seed=seed, collect_stats=False)
+    stop = MaxRuntime(time_limit) if max_iterations is None else MaxIterations(max_iterations)
+    result = pyvrp.solve(data, stop, seed=seed, collect_stats=False)
     routes: list[list[int]] = [[] for _ in range(r)]
     if not result.best.is_feasible():
         return routes

@@ -76,6 +76,8 @@ class RoutingExpert:
             fallback's reach in both modes (``None``: unlimited).
         time_limit: Seconds per solve.
         seed: Solver seed (PyVRP).
+        max_iterations: Stop each solve after this many iterations (PyVRP) or solutions
+            (OR-Tools) instead of ``time_limit``: deterministic plans, for datasets.
     """
 
     def __init__(
@@ -85,6 +87,7 @@ class RoutingExpert:
         horizon: int | None = None,
         time_limit: float = 1.0,
         seed: int = 0,
+        max_iterations: int | None = None,
     ) -> None:
         if backend not in BACKENDS:
             raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
@@ -99,6 +102,7 @@ class RoutingExpert:
         self.horizon = horizon
         self.time_limit = time_limit
         self.seed = seed
+        self.max_iterations = max_iterations
         self.counts: Counter[str] = Counter()
         self.info: dict[str, Any] = {}
         self.reset()
@@ -122,7 +126,9 @@ class RoutingExpert:
         problem = build_problem(snapshot, horizon)
         start = time.perf_counter()
         try:
-            routes = solve(problem, self.backend, self.time_limit, self.seed)
+            routes = solve(
+                problem, self.backend, self.time_limit, self.seed, self.max_iterations
+            )
         except Exception:  # noqa: BLE001 (any solver failure falls back to greedy)
             routes = [[] for _ in range(problem.num_robots)]
             self.counts["failed_solve"] += 1
