@@ -1,10 +1,16 @@
-"""Greedy sweep of the paper's Fig. "coverage": ours beside the paper's CSV, and a plot.
+"""The paper's Fig. "coverage" sweeps: greedy and the receding-horizon expert against K.
 
-Runs greedy for K = 3, 5, ..., 19 on 100 seeded windows of the paper's map (4 robots), with
-T = 50 actions (ours) and T = 49 (what the paper's code ran), and prints each mean +- SEM beside
-``shared/reference/paper_results.csv``. Writes JSON and a PNG of mean +- SEM against K.
+Runs each method for K = 3, 5, ..., 19 on 100 seeded windows of the paper's map (4 robots,
+T = 50; greedy also with T = 49, what the paper's code ran), prints mean +- SEM beside
+``shared/reference/paper_results.csv`` and draws mean +- SEM against K to a PNG.
 
-    python scripts/reproduce_paper.py [--episodes 100] [--out outputs/reproduce_paper]
+Each (method, K) result is written to ``OUT/<method>_K<k>.json`` as soon as it is done and is
+skipped when present, so the sweep resumes after an interrupt and can be split over processes
+(``--hops 3 5 7`` in one, ``--hops 9 11`` in another); ``--table-only`` prints and plots what
+is there.
+
+    python scripts/reproduce_paper.py [--methods greedy expert_rh] [--hops 3 5 ... 19]
+        [--episodes 100] [--expert-time-limit 0.15] [--backend pyvrp] [--out outputs/paper]
 """
 
 from __future__ import annotations
@@ -26,76 +32,138 @@ HOPS = list(range(3, 20, 2))
 PAPER_CSV = (
     Path(__file__).resolve().parent.parent.parent / "shared" / "reference" / "paper_results.csv"
 )
+#: Our method names -> the paper's, and the episode lengths each is run with.
+METHODS = {
+    "greedy": ("greedy", (50, 49)),
+    "expert_rh": ("expert_receding_horizon", (50,)),
+}
 
 
-def paper_numbers(path: Path, task: str, method: str) -> dict[int, tuple[float, float]]:
-    """``{K: (mean, sem)}`` from the paper's CSV (SEM = std / sqrt(episodes))."""
+def paper_numbers(path: Path, task: str = "coverage") -> dict[tuple[str, int], tuple[float, float]]:
+    """``{(paper method, K): (mean, sem)}`` from the paper's CSV (SEM = std / sqrt(n))."""
     if not path.is_file():
         return {}
     with path.open() as handle:
         return {
-            int(row["x"]): (
+            (row["method"], int(row["x"])): (
                 float(row["mean_reward"]),
                 float(row["std_reward"]) / float(row["episodes"]) ** 0.5,
             )
             for row in csv.DictReader(handle)
-            if row["task"] == task and row["method"] == method
+            if row["task"] == task and row["x_name"] == "receptive_field_K"
         }
+
+
+def make_policy(method: str, hops: int, args: argparse.Namespace):  # noqa: ANN201
+    if method == "greedy":
+        return GreedyPolicy(hops, fallback="random")
+    from agents.experts import RoutingExpert
+
+    return RoutingExpert(
+        backend=args.backend, mode="receding", horizon=hops, time_limit=args.expert_time_limit
+    )
+
+
+def run(method: str, hops: int, args: argparse.Namespace) -> dict:
+    seeds = range(args.seed, args.seed + args.episodes)
+    record: dict = {"method": method, "hops": hops, "episodes": args.episodes, "seed": args.seed}
+    if method == "expert_rh":
+        record["expert"] = {"backend": args.backend, "time_limit": args.expert_time_limit}
+    for steps in METHODS[method][1]:
+        env = parallel_env(map="paper", hops=hops, max_steps=steps)
+        summary = evaluate(env, make_policy(method, hops, args), seeds)
+        record[f"T{steps}"] = {
+            "mean": summary.mean,
+            "std": summary.std,
+            "sem": summary.sem,
+            "controller_ms_per_step": summary.controller_ms_per_step,
+            "counts": summary.policy_counts,
+        }
+    return record
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--methods", nargs="+", default=list(METHODS), choices=list(METHODS))
+    parser.add_argument("--hops", nargs="+", type=int, default=HOPS)
     parser.add_argument("--episodes", type=int, default=100)
     parser.add_argument("--seed", type=int, default=0, help="first episode seed")
-    parser.add_argument("--out", type=Path, default=Path("outputs/reproduce_paper"))
+    parser.add_argument("--backend", default="pyvrp", choices=["pyvrp", "ortools"])
+    parser.add_argument("--expert-time-limit", type=float, default=0.15)
+    parser.add_argument("--out", type=Path, default=Path("outputs/paper"))
+    parser.add_argument("--table-only", action="store_true")
     args = parser.parse_args()
-    seeds = range(args.seed, args.seed + args.episodes)
-    paper = paper_numbers(PAPER_CSV, "coverage", "greedy")
-    rows = []
-    print(
-        f"greedy, 4 robots, paper windows, {args.episodes} episodes "
-        f"(seeds {seeds.start}..{seeds.stop - 1})"
-    )
-    print(f"{'K':>3} {'ours T=50':>14} {'ours T=49':>14} {'paper (T=49)':>14}")
+    if not args.table_only:
+        for method in args.methods:
+            for hops in args.hops:
+                path = args.out / f"{method}_K{hops}.json"
+                if path.exists():
+                    continue
+                write_text_atomic(path, json.dumps(run(method, hops, args), indent=2))
+                print(f"done {method} K={hops}", flush=True)
+    records = [json.loads(p.read_text()) for p in sorted(args.out.glob("*_K*.json"))]
+    print_table(records)
+    if records:
+        plot(records, args.out / "coverage.png")
+        print(f"wrote {args.out / 'coverage.png'}")
+
+
+def print_table(records: list[dict]) -> None:
+    paper = paper_numbers(PAPER_CSV)
+    by_key = {(r["method"], r["hops"]): r for r in records}
+    header = f"{'K':>3}"
+    columns = []
+    for method, (paper_name, lengths) in METHODS.items():
+        for steps in lengths:
+            columns.append((f"{method} T={steps}", method, f"T{steps}"))
+        columns.append((f"paper {method}", paper_name, "paper"))
+    print(header + "".join(f"{name:>22}" for name, *_ in columns))
     for hops in HOPS:
-        row = {"hops": hops}
-        for steps in (50, 49):
-            env = parallel_env(map="paper", hops=hops, max_steps=steps)
-            summary = evaluate(env, GreedyPolicy(hops, fallback="random"), seeds)
-            row[f"T{steps}"] = {"mean": summary.mean, "std": summary.std, "sem": summary.sem}
-        if hops in paper:
-            row["paper"] = {"mean": paper[hops][0], "sem": paper[hops][1]}
-        rows.append(row)
-        cells = [
-            f"{row[k]['mean']:6.1f} +- {row[k]['sem']:4.2f}" if k in row else f"{'-':>14}"
-            for k in ("T50", "T49", "paper")
-        ]
-        print(f"{hops:>3} " + " ".join(f"{c:>14}" for c in cells), flush=True)
-    write_text_atomic(args.out / "greedy_coverage.json", json.dumps(rows, indent=2))
-    plot(rows, args.out / "greedy_coverage.png")
-    print(f"wrote {args.out}/greedy_coverage.json and .png")
+        cells = []
+        for _, method, key in columns:
+            if key == "paper":
+                value = paper.get((method, hops))
+            else:
+                record = by_key.get((method, hops), {}).get(key)
+                value = (record["mean"], record["sem"]) if record else None
+            cells.append(f"{value[0]:7.1f} +- {value[1]:4.2f}" if value else "-")
+        print(f"{hops:>3}" + "".join(f"{c:>22}" for c in cells))
 
 
-def plot(rows: list[dict], path: Path) -> None:
+def plot(records: list[dict], path: Path) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(6, 4), dpi=120)
-    for key, label, style in (
-        ("T50", "greedy, ours (T=50)", "o-"),
-        ("T49", "greedy, ours (T=49)", "s-"),
-        ("paper", "greedy, paper", "k^--"),
-    ):
-        points = [(r["hops"], r[key]["mean"], r[key]["sem"]) for r in rows if key in r]
+    paper = paper_numbers(PAPER_CSV)
+    fig, ax = plt.subplots(figsize=(7, 4.5), dpi=120)
+    for colour, (method, (paper_name, lengths)) in zip("br", METHODS.items(), strict=False):
+        points = sorted(
+            (r["hops"], r[f"T{lengths[0]}"]["mean"], r[f"T{lengths[0]}"]["sem"])
+            for r in records
+            if r["method"] == method
+        )
         if points:
             x, y, e = zip(*points, strict=True)
-            ax.errorbar(x, y, yerr=e, fmt=style, capsize=3, label=label)
+            ax.errorbar(x, y, yerr=e, fmt="o-", color=colour, capsize=3, label=f"{method}, ours")
+        ref = sorted((k, *v) for (m, k), v in paper.items() if m == paper_name)
+        if ref:
+            x, y, e = zip(*ref, strict=True)
+            ax.errorbar(
+                x,
+                y,
+                yerr=e,
+                fmt="^--",
+                color=colour,
+                alpha=0.5,
+                capsize=3,
+                label=f"{method}, paper",
+            )
     ax.set_xlabel("receptive field / horizon K")
     ax.set_ylabel("episode reward (mean +- SEM)")
-    ax.set_title("Coverage, 4 robots, windows of the paper's map")
-    ax.legend()
+    ax.set_title("Coverage, 4 robots, windows of the paper's map, T = 50")
+    ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)

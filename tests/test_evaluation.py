@@ -63,3 +63,27 @@ def test_cli_rejects_unknown_keys() -> None:
     assert result.returncode != 0 and "polcy" in result.stderr
     result = run_cli("expert.budget=3")
     assert result.returncode != 0 and "expert.budget" in result.stderr
+
+
+def test_reproduce_paper_resumes_and_prints_the_table(tmp_path, paper_map_available) -> None:
+    command = [
+        sys.executable,
+        str(ROOT / "scripts" / "reproduce_paper.py"),
+        "--methods",
+        "greedy",
+        "--hops",
+        "3",
+        "--episodes",
+        "2",
+        "--out",
+        str(tmp_path),
+    ]
+    first = subprocess.run(command, capture_output=True, text=True, cwd=ROOT, timeout=300)
+    assert first.returncode == 0, first.stderr
+    assert "done greedy K=3" in first.stdout
+    record = json.loads((tmp_path / "greedy_K3.json").read_text())
+    assert set(record) >= {"T50", "T49"}
+    second = subprocess.run(command, capture_output=True, text=True, cwd=ROOT, timeout=300)
+    assert "done greedy" not in second.stdout  # resumed: nothing left to run
+    assert "57.4 +- 1.66" in second.stdout  # the paper's greedy at K = 3, beside ours
+    assert (tmp_path / "coverage.png").exists()

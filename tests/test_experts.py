@@ -97,3 +97,18 @@ def test_bad_arguments() -> None:
         RoutingExpert(backend="gurobi")
     with pytest.raises(ValueError, match="horizon"):
         RoutingExpert(mode="receding")
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("warm_start", [True, False])
+def test_receding_horizon_reaches_the_optimum(path_graph, backend, warm_start) -> None:
+    env = path_env(path_graph, [3], [0, 1, 6, 7], 10)
+    expert = RoutingExpert(
+        backend=backend, mode="receding", horizon=10, time_limit=0.05, warm_start=warm_start
+    )
+    total = 0.0
+    while env.agents:
+        _, rewards, *_ = env.step(expert.act_env(env))
+        total += rewards["robot_0"]
+    assert total == 4
+    assert expert.counts["solves"] == 10 and expert.counts["failed_solve"] == 0

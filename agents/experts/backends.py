@@ -22,8 +22,12 @@ def solve(
     time_limit: float,
     seed: int = 0,
     max_iterations: int | None = None,
+    initial: list[list[int]] | None = None,
 ) -> list[list[int]]:
     """Routes (candidate indices per robot) from the named backend.
+
+    ``initial`` (feasible candidate-index routes, such as the previous step's plan) warm-starts
+    the search.
 
     With ``max_iterations`` the search stops after that many iterations (PyVRP) or solutions
     (OR-Tools) instead of after ``time_limit``, which makes it deterministic for a seed.
@@ -34,14 +38,17 @@ def solve(
     if problem.num_candidates == 0:
         return [[] for _ in range(problem.num_robots)]
     if backend == "pyvrp":
-        return solve_pyvrp(problem, time_limit, seed, max_iterations)
+        return solve_pyvrp(problem, time_limit, seed, max_iterations, initial)
     if backend == "ortools":
-        return solve_ortools(problem, time_limit, max_iterations)
+        return solve_ortools(problem, time_limit, max_iterations, initial)
     raise ValueError(f"unknown routing backend {backend!r}; choose one of {BACKENDS}")
 
 
 def solve_ortools(
-    problem: RoutingProblem, time_limit: float, max_solutions: int | None = None
+    problem: RoutingProblem,
+    time_limit: float,
+    max_solutions: int | None = None,
+    initial: list[list[int]] | None = None,
 ) -> list[list[int]]:
     """The paper's formulation, with per-robot start nodes instead of a dummy depot.
 
@@ -76,7 +83,17 @@ def solve_ortools(
         params.time_limit.FromMilliseconds(max(1, int(1000 * time_limit)))
     else:
         params.solution_limit = max_solutions
-    solution = routing.SolveWithParameters(params)
+    start = None
+    if initial is not None and any(initial):
+        routing.CloseModelWithParameters(params)
+        start = routing.ReadAssignmentFromRoutes(
+            [[r + k for k in route] for route in initial], True
+        )
+    solution = (
+        routing.SolveFromAssignmentWithParameters(start, params)
+        if start is not None
+        else routing.SolveWithParameters(params)
+    )
     routes: list[list[int]] = [[] for _ in range(r)]
     if solution is None:
         return routes
@@ -93,6 +110,7 @@ def solve_pyvrp(
     time_limit: float,
     seed: int = 0,
     max_iterations: int | None = None,
+    initial: list[list[int]] | None = None,
 ) -> list[list[int]]:
     """Prize-collecting VRP in PyVRP: one start depot per robot, a shared free end depot,
     optional clients with prizes, a maximum route distance per robot."""
@@ -121,7 +139,12 @@ def solve_pyvrp(
         locations, clients, depots, vehicles, [matrix], [np.zeros_like(matrix)]
     )
     stop = MaxRuntime(time_limit) if max_iterations is None else MaxIterations(max_iterations)
-    result = pyvrp.solve(data, stop, seed=seed, collect_stats=False)
+    start = None
+    if initial is not None and any(initial):
+        start = pyvrp.Solution(
+            data, [pyvrp.Route(data, route, v) for v, route in enumerate(initial) if route]
+        )
+    result = pyvrp.solve(data, stop, seed=seed, collect_stats=False, initial_solution=start)
     routes: list[list[int]] = [[] for _ in range(r)]
     if not result.best.is_feasible():
         return routes

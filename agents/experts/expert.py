@@ -76,6 +76,7 @@ class RoutingExpert:
             fallback's reach in both modes (``None``: unlimited).
         time_limit: Seconds per solve.
         seed: Solver seed (PyVRP).
+        warm_start: Start each solve from the previous plan (receding horizon, re-plans).
         max_iterations: Stop each solve after this many iterations (PyVRP) or solutions
             (OR-Tools) instead of ``time_limit``: deterministic plans, for datasets.
     """
@@ -88,6 +89,7 @@ class RoutingExpert:
         time_limit: float = 1.0,
         seed: int = 0,
         max_iterations: int | None = None,
+        warm_start: bool = True,
     ) -> None:
         if backend not in BACKENDS:
             raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
@@ -103,6 +105,7 @@ class RoutingExpert:
         self.time_limit = time_limit
         self.seed = seed
         self.max_iterations = max_iterations
+        self.warm_start = warm_start
         self.counts: Counter[str] = Counter()
         self.info: dict[str, Any] = {}
         self.reset()
@@ -124,10 +127,11 @@ class RoutingExpert:
         """
         horizon = self.horizon if self.mode == "receding" else None
         problem = build_problem(snapshot, horizon)
+        initial = self._warm_start(problem)
         start = time.perf_counter()
         try:
             routes = solve(
-                problem, self.backend, self.time_limit, self.seed, self.max_iterations
+                problem, self.backend, self.time_limit, self.seed, self.max_iterations, initial
             )
         except Exception:  # noqa: BLE001 (any solver failure falls back to greedy)
             routes = [[] for _ in range(problem.num_robots)]
@@ -138,6 +142,19 @@ class RoutingExpert:
             self.counts["failed_solve"] += 1
             routes = [[] for _ in range(problem.num_robots)]
         return self._to_waypoints(problem, routes)
+
+    def _warm_start(self, problem: RoutingProblem) -> list[list[int]] | None:
+        """The previous plan in the new problem's candidate indices, cut to fit the budgets."""
+        if not self.warm_start or self._routes is None:
+            return None
+        index = {int(w): k for k, w in enumerate(problem.candidates)}
+        routes = []
+        for r, route in enumerate(self._routes):
+            stops = [index[w] for w in route if w in index]
+            while stops and problem.route_length(r, stops) > problem.budget[r]:
+                stops.pop()
+            routes.append(stops)
+        return routes if problem.is_feasible(routes) else None
 
     @staticmethod
     def _to_waypoints(problem: RoutingProblem, routes: list[list[int]]) -> list[list[int]]:
