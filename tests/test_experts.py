@@ -22,6 +22,15 @@ def path_env(path_graph, robots, interest, max_steps):
     return env
 
 
+def play(env, expert) -> float:
+    """The team reward of one episode played by ``expert``."""
+    total = 0.0
+    while env.agents:
+        _, rewards, *_ = env.step(expert.act_env(env))
+        total += rewards["robot_0"]
+    return total
+
+
 @pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize(("max_steps", "optimum"), [(4, 2), (8, 3), (9, 3), (10, 4)])
 def test_single_robot_optimum(path_graph, backend, max_steps, optimum) -> None:
@@ -48,11 +57,7 @@ def test_two_robots_split_the_work(tee_graph, backend) -> None:
 def test_expert_collects_the_optimum_in_the_env(path_graph, backend) -> None:
     env = path_env(path_graph, [3], [0, 1, 6, 7], 10)
     expert = RoutingExpert(backend=backend, time_limit=0.2)
-    total = 0.0
-    while env.agents:
-        _, rewards, *_ = env.step(expert.act_env(env))
-        total += rewards["robot_0"]
-    assert total == 4
+    assert play(env, expert) == 4
     assert expert.counts["solves"] == 1 and expert.counts["failed_solve"] == 0
 
 
@@ -106,9 +111,5 @@ def test_receding_horizon_reaches_the_optimum(path_graph, backend, warm_start) -
     expert = RoutingExpert(
         backend=backend, mode="receding", horizon=10, time_limit=0.05, warm_start=warm_start
     )
-    total = 0.0
-    while env.agents:
-        _, rewards, *_ = env.step(expert.act_env(env))
-        total += rewards["robot_0"]
-    assert total == 4
+    assert play(env, expert) == 4
     assert expert.counts["solves"] == 10 and expert.counts["failed_solve"] == 0
