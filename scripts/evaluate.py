@@ -34,8 +34,9 @@ POLICIES = ("greedy", "greedy_central", "expert", "expert_rh")
 @dataclass
 class ExpertOptions:
     backend: str = "pyvrp"
-    time_limit: float = 1.0
+    time_limit: float = 0.9
     seed: int = 0
+    warm_start: bool = True
 
 
 @dataclass
@@ -101,6 +102,7 @@ def make_policy(options: EvaluateOptions, expert: ExpertOptions, hops: int) -> A
         horizon=hops if receding else None,
         time_limit=expert.time_limit,
         seed=expert.seed,
+        warm_start=expert.warm_start,
     )
 
 

@@ -86,7 +86,7 @@ class RoutingExpert:
         backend: str = "pyvrp",
         mode: str = "open_loop",
         horizon: int | None = None,
-        time_limit: float = 1.0,
+        time_limit: float = 0.9,
         seed: int = 0,
         max_iterations: int | None = None,
         warm_start: bool = True,
