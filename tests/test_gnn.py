@@ -1,0 +1,98 @@
+"""The aggregation GNNs: ego-graph (decentralized) == state (centralized), equivariance, masks."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import marl_cover
+
+torch = pytest.importorskip("torch")
+
+from agents.models import (  # noqa: E402
+    AggregationGNN,
+    GNNConfig,
+    centralized_logits,
+    decentralized_logits,
+)
+
+
+def tensors(arrays: dict[str, np.ndarray]) -> dict[str, torch.Tensor]:
+    return {k: torch.as_tensor(v) for k, v in arrays.items()}
+
+
+def random_states(hops: int, seed: int):
+    env = marl_cover.parallel_env(num_robots=6, hops=hops, city_size=200)
+    rng = np.random.default_rng(seed)
+    env.reset(seed=seed)
+    for _ in range(3):
+        yield env
+        env.step({a: int(rng.integers(5)) for a in env.agents})
+
+
+@pytest.mark.parametrize("kind", ["linear", "nonlinear"])
+@pytest.mark.parametrize("hops", [1, 3, 19])
+def test_ego_graphs_give_the_logits_of_one_pass_over_the_state(kind: str, hops: int) -> None:
+    torch.manual_seed(hops)
+    model = AggregationGNN(GNNConfig(kind=kind, hops=hops)).double()
+    for env in random_states(hops, seed=hops):
+        batch = {
+            k: v.double() if v.is_floating_point() else v
+            for k, v in tensors(env.observe_batch()).items()
+        }
+        state = {
+            k: v.double() if v.is_floating_point() else v for k, v in tensors(env.state()).items()
+        }
+        with torch.no_grad():
+            local = decentralized_logits(model, batch)
+            central = centralized_logits(model, state)
+        mask = torch.as_tensor(env.state()["action_mask"]).bool()
+        assert torch.equal(torch.isinf(local), ~mask) and torch.equal(torch.isinf(central), ~mask)
+        torch.testing.assert_close(local[mask], central[mask], atol=1e-5, rtol=0)
+        # and in float32, as trained
+        with torch.no_grad():
+            single = decentralized_logits(model.float(), tensors(env.observe_batch()))
+        torch.testing.assert_close(single[mask].double(), central[mask], atol=1e-4, rtol=0)
+        model.double()
+
+
+@pytest.mark.parametrize("kind", ["linear", "nonlinear"])
+def test_renumbering_nodes_and_edges_changes_nothing(kind: str) -> None:
+    torch.manual_seed(0)
+    model = AggregationGNN(GNNConfig(kind=kind, hops=5)).double()
+    env = marl_cover.parallel_env(num_robots=4, hops=5, city_size=150)
+    env.reset(seed=4)
+    state = {k: torch.as_tensor(v) for k, v in env.state().items()}
+    keep = state["edge_mask"]
+    nodes, index, attr = (
+        state["nodes"].double(),
+        state["edge_index"][:, keep],
+        state["edge_attr"][keep].double(),
+    )
+    with torch.no_grad():
+        reference = model(nodes, index, attr)
+        rng = np.random.default_rng(0)
+        node_perm = torch.as_tensor(rng.permutation(nodes.shape[0]))  # new position of each node
+        edge_perm = torch.as_tensor(rng.permutation(index.shape[1]))
+        inverse = torch.empty_like(node_perm)
+        inverse[node_perm] = torch.arange(len(node_perm))
+        renumbered = model(nodes[inverse], node_perm[index][:, edge_perm], attr[edge_perm])
+    torch.testing.assert_close(renumbered, reference[edge_perm], atol=1e-9, rtol=0)
+
+
+def test_masked_actions_get_no_probability() -> None:
+    model = AggregationGNN(GNNConfig(hops=3))
+    env = marl_cover.parallel_env(num_robots=4, hops=3, city_size=120)
+    env.reset(seed=1)
+    batch = tensors(env.observe_batch())
+    with torch.no_grad():
+        probs = torch.softmax(decentralized_logits(model, batch), dim=-1)
+    mask = batch["action_mask"].bool()
+    assert torch.all(probs[~mask] == 0) and torch.allclose(probs.sum(-1), torch.ones(4))
+
+
+def test_parameter_count_matches_the_paper_shape() -> None:
+    linear = AggregationGNN(GNNConfig(kind="linear", hops=19, hidden=16))
+    count = sum(p.numel() for p in linear.parameters())
+    # encoders (4->16->16->16 and 1->16->16->16), edge decoder (16x3), readout (20*16 + 1)
+    assert count == (4 * 16 + 16 + 2 * 272) + (16 + 16 + 2 * 272) + 3 * 272 + (20 * 16 + 1)
