@@ -66,12 +66,15 @@ def test_stranded_robot_falls_back_to_greedy(path_graph, backend) -> None:
     # receding horizon 2: point 7 is four hops from robot 3, out of the plan's reach
     env = path_env(path_graph, [3], [7], 10)
     expert = RoutingExpert(backend=backend, mode="receding", horizon=2, time_limit=0.1)
-    actions = expert.act_env(env)
-    assert actions == {"robot_0": 0}  # nothing within the horizon: greedy stays too
+    assert expert.act_env(env) == {"robot_0": 1}  # the fallback sees the whole map: east
     assert expert.info == {"fallback": 1, "replanned": True}
+    short = RoutingExpert(
+        backend=backend, mode="receding", horizon=2, time_limit=0.1, fallback_reach=2
+    )
+    assert short.act_env(env) == {"robot_0": 0}  # nothing within two hops: stay
     open_loop = RoutingExpert(backend=backend, time_limit=0.1)
     env = path_env(path_graph, [3], [7], 3)  # three steps left: unreachable in open loop
-    assert open_loop.act_env(env) == {"robot_0": 1}  # unlimited greedy heads east anyway
+    assert open_loop.act_env(env) == {"robot_0": 1}  # greedy heads east anyway
     assert open_loop.counts["fallback_steps"] == 1
 
 

@@ -11,7 +11,8 @@ Modes:
 
 Fallback (it never crashes an episode): a robot whose route is empty (nothing in reach, an
 empty, failed or infeasible solve) takes the greedy action toward the nearest unvisited point
-of interest within ``horizon`` hops (or anywhere, in open loop), staying if there is none. Each
+of interest within ``fallback_reach`` hops (default: anywhere; the expert knows the whole map,
+and the horizon bounds only its plans), staying if there is none. Each
 step's fallbacks and re-plans are in :attr:`RoutingExpert.info`; totals in
 :attr:`RoutingExpert.counts`.
 
@@ -76,6 +77,7 @@ class RoutingExpert:
             fallback's reach in both modes (``None``: unlimited).
         time_limit: Seconds per solve.
         seed: Solver seed (PyVRP).
+        fallback_reach: How far the greedy fallback looks, in hops (``None``: the whole map).
         warm_start: Start each solve from the previous plan (receding horizon, re-plans).
         max_iterations: Stop each solve after this many iterations (PyVRP) or solutions
             (OR-Tools) instead of ``time_limit``: deterministic plans, for datasets.
@@ -90,6 +92,7 @@ class RoutingExpert:
         seed: int = 0,
         max_iterations: int | None = None,
         warm_start: bool = True,
+        fallback_reach: int | None = None,
     ) -> None:
         if backend not in BACKENDS:
             raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
@@ -106,6 +109,7 @@ class RoutingExpert:
         self.seed = seed
         self.max_iterations = max_iterations
         self.warm_start = warm_start
+        self.fallback_reach = fallback_reach
         self.counts: Counter[str] = Counter()
         self.info: dict[str, Any] = {}
         self.reset()
@@ -183,7 +187,7 @@ class RoutingExpert:
                 self.counts["replans"] += 1
         goals = np.array([route[0] if route else -1 for route in self._routes], dtype=np.int64)
         fallback = np.flatnonzero(goals < 0)
-        limit = np.inf if self.horizon is None else self.horizon
+        limit = np.inf if self.fallback_reach is None else self.fallback_reach
         goals[fallback] = greedy_goals(snapshot, fallback, limit)
         actions = step_toward(snapshot.graph, snapshot.robot_node, goals)
         self.counts["fallback_steps"] += len(fallback)
