@@ -4,7 +4,8 @@ Cases: (a) 4 robots on windows of the paper's map, K = 19; (b) 100 robots on the
 5659-waypoint map, K = 19; (c) the default procedural city. Random valid actions; resets
 (new windows and cities) are included in the timing. Prints a table and writes JSON.
 
-    python scripts/bench_env.py [--seconds 5] [--out outputs/bench_env.json]
+    python scripts/bench_env.py [--seconds 5] [--backend auto|numpy|numba]
+                                [--out outputs/bench_env.json]
 """
 
 from __future__ import annotations
@@ -71,6 +72,12 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=5.0)
     parser.add_argument("--out", type=Path, default=Path("outputs/bench_env.json"))
+    parser.add_argument(
+        "--backend",
+        default="auto",
+        choices=["auto", "numpy", "numba"],
+        help="ego-graph builder (see CoverageConfig.ego_backend)",
+    )
     args = parser.parse_args()
     results = {}
     print(
@@ -79,7 +86,7 @@ def main() -> None:
     )
     for name, config in CASES.items():
         try:
-            result = bench(config, args.seconds)
+            result = bench({**config, "ego_backend": args.backend}, args.seconds)
         except FileNotFoundError as error:  # the paper's map is not on this machine
             print(f"{name:<38} skipped: {error}")
             continue
