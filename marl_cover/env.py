@@ -66,6 +66,7 @@ Version history: v0, first release.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import warnings
 from dataclasses import dataclass
@@ -143,14 +144,8 @@ class CoverageEnv(ParallelEnv):
         """
         base = config or CoverageConfig()
         if overrides:
-            values = {f: getattr(base, f) for f in base.__dataclass_fields__}
-            unknown = sorted(set(overrides) - set(values))
-            if unknown:
-                raise TypeError(
-                    f"unknown CoverageConfig key(s) {unknown}; valid keys are {sorted(values)}"
-                )
-            values.update(overrides)
-            base = CoverageConfig(**values)
+            values = {f.name: getattr(base, f.name) for f in dataclasses.fields(base)}
+            base = CoverageConfig.from_dict({**values, **overrides})
         self.config = base
         self.render_mode = base.render_mode
         self.possible_agents = [f"robot_{i}" for i in range(base.num_robots)]
