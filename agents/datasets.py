@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from marl_cover.ego import PaddedShape, build_ego_graphs
+from marl_cover.ego import PaddedShape, build_ego_graphs, waypoint_features
 from marl_cover.env import CoverageEnv
 from marl_cover.graph import SpatialGraph
 
@@ -68,9 +68,7 @@ class Episode:
         self, step: int, hops: int, shape: PaddedShape, backend: str = "numpy"
     ) -> dict[str, np.ndarray]:
         """Every robot's ego-observation before action ``step``, stacked over robots."""
-        features = np.zeros((self.graph.num_nodes, 4), dtype=np.float32)
-        features[:, 1] = 1.0
-        features[:, 2] = self.interest & ~self.visited(step)
+        features = waypoint_features(self.interest & ~self.visited(step))
         return build_ego_graphs(self.graph, self.robot_node[step], features, hops, shape, backend)
 
 

@@ -93,6 +93,14 @@ def graph_space(shape: PaddedShape, extra: dict[str, spaces.Space] | None = None
     return spaces.Dict(fields)
 
 
+def waypoint_features(unvisited_interest: np.ndarray) -> np.ndarray:
+    """Coverage node features of every waypoint, ``(N, 4)`` float32 (``is_frontier`` is 0)."""
+    features = np.zeros((len(unvisited_interest), NUM_NODE_FEATURES), dtype=np.float32)
+    features[:, 1] = 1.0
+    features[:, 2] = unvisited_interest
+    return features
+
+
 def action_targets(graph: SpatialGraph, robot_node: np.ndarray) -> np.ndarray:
     """Waypoint reached by each action slot, ``(num_robots, 5)`` int64, ``-1`` if none."""
     return np.concatenate([robot_node[:, None], graph.neighbors[robot_node]], axis=1)

@@ -81,7 +81,6 @@ from marl_cover.collisions import resolve_collisions
 from marl_cover.config import CoverageConfig
 from marl_cover.ego import (
     NUM_ACTIONS,
-    NUM_NODE_FEATURES,
     StateBuilder,
     action_targets,
     build_ego_graphs,
@@ -89,6 +88,7 @@ from marl_cover.ego import (
     graph_space,
     resolve_backend,
     state_shape,
+    waypoint_features,
 )
 from marl_cover.graph import SpatialGraph
 from marl_cover.sources import make_map_source
@@ -224,9 +224,7 @@ class CoverageEnv(ParallelEnv):
         self._robot_node = self._draw_starts(graph, options.get("robot_nodes"))
         self._visited = np.zeros(graph.num_nodes, dtype=bool)
         self._visited[self._robot_node] = True
-        self._waypoint_features = np.zeros((graph.num_nodes, NUM_NODE_FEATURES), np.float32)
-        self._waypoint_features[:, 1] = 1.0
-        self._waypoint_features[:, 2] = self._interest & ~self._visited
+        self._waypoint_features = waypoint_features(self._interest & ~self._visited)
         self._num_steps = 0
         self._credits = np.zeros(self.config.num_robots, dtype=np.int64)
         self._trails: list[np.ndarray] = [self._robot_node.copy()]
