@@ -1,4 +1,4 @@
-"""Helpers shared by the command-line scripts: ``key=value`` values and atomic writes."""
+"""Helpers shared by the scripts and training loops: ``key=value`` values and atomic writes."""
 
 from __future__ import annotations
 
@@ -23,13 +23,23 @@ def parse_value(text: str) -> Any:
     return text
 
 
-def write_text_atomic(path: str | Path, text: str) -> Path:
-    """Writes ``text`` to a temporary file beside ``path``, then renames it into place."""
+def write_bytes_atomic(path: str | Path, data: bytes) -> Path:
+    """Writes ``data`` to a temporary file beside ``path``, then renames it into place."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.NamedTemporaryFile(
-        "w", dir=path.parent, delete=False, suffix=".tmp", newline=""
-    ) as handle:
-        handle.write(text)
-    os.replace(handle.name, path)
+    with tempfile.NamedTemporaryFile(dir=path.parent, prefix=".tmp_", delete=False) as handle:
+        temporary = Path(handle.name)
+        try:
+            handle.write(data)
+        except BaseException:
+            handle.close()
+            temporary.unlink(missing_ok=True)
+            raise
+    temporary.chmod(0o644)
+    os.replace(temporary, path)
     return path
+
+
+def write_text_atomic(path: str | Path, text: str) -> Path:
+    """Writes ``text`` (UTF-8) atomically, as :func:`write_bytes_atomic`."""
+    return write_bytes_atomic(path, text.encode("utf-8"))

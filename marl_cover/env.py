@@ -179,6 +179,11 @@ class CoverageEnv(ParallelEnv):
         self._renderer: Any = None
 
     # ------------------------------------------------------------------ spaces
+    @property
+    def max_waypoints(self) -> int:
+        """Most waypoints of any map this environment can draw (the padding bound)."""
+        return self._map_source.max_waypoints
+
     def observation_space(self, agent: str) -> gymnasium.spaces.Dict:
         """The observation space of ``agent`` (one shared object)."""
         self._agent_index(agent)

@@ -4,9 +4,16 @@
         map=paper out=results.json
     python scripts/evaluate.py policy=expert expert.backend=ortools expert.time_limit=1.0
     python scripts/evaluate.py policy=expert_rh hops=19 expert.time_limit=0.15
+    python scripts/evaluate.py policy=gnn map=paper                 # the shipped model
+    python scripts/evaluate.py policy=gnn checkpoint=outputs/bc/nonlinear_k19/best.pt \
+        map=paper_large num_robots=100 gnn.centralized=true
 
 Policies: ``greedy`` (each robot on its ego-graph), ``greedy_central`` (same actions, from
-``state()``), ``expert`` (open-loop routing), ``expert_rh`` (receding horizon over ``hops``).
+``state()``), ``expert`` (open-loop routing), ``expert_rh`` (receding horizon over ``hops``),
+``gnn`` (the shipped model of the task, or ``checkpoint=PATH``; each robot on its own ego-graph,
+or ``gnn.centralized=true`` for one pass over ``state()``; argmax actions unless
+``gnn.deterministic=false``). A GNN runs with the receptive field it was trained with: ``hops``
+defaults to the model's.
 Maps: ``city`` (default), ``paper`` (windows of the paper's map), ``paper_full``,
 ``paper_large``, or a grid file. Any other ``key=value`` is a field of ``CoverageConfig``
 (``num_robots=10``, ``max_steps=49``, ...); an unknown key is an error.
@@ -28,7 +35,7 @@ from agents.cli import parse_value, write_text_atomic  # noqa: E402
 from agents.evaluation import evaluate  # noqa: E402
 from marl_cover import CoverageConfig, parallel_env  # noqa: E402
 
-POLICIES = ("greedy", "greedy_central", "expert", "expert_rh")
+POLICIES = ("greedy", "greedy_central", "expert", "expert_rh", "gnn")
 
 
 @dataclass
@@ -40,6 +47,12 @@ class ExpertOptions:
 
 
 @dataclass
+class GNNOptions:
+    centralized: bool = False
+    deterministic: bool = True
+
+
+@dataclass
 class EvaluateOptions:
     task: str = "coverage"
     policy: str = "greedy"
@@ -47,15 +60,18 @@ class EvaluateOptions:
     seed: int = 0
     out: str = "outputs/evaluate.json"
     fallback: str = "random"  # greedy's choice when nothing is in reach
+    checkpoint: str | None = None  # policy=gnn: a model file (default: the shipped model)
 
 
-def parse_overrides(argv: list[str]) -> tuple[EvaluateOptions, ExpertOptions, dict[str, Any]]:
-    """Splits ``key=value`` arguments into script, expert and environment options.
+def parse_overrides(
+    argv: list[str],
+) -> tuple[EvaluateOptions, ExpertOptions, GNNOptions, dict[str, Any]]:
+    """Splits ``key=value`` arguments into script, expert, GNN and environment options.
 
     Raises:
         SystemExit: a malformed argument or an unknown key, naming it.
     """
-    options, expert, env = EvaluateOptions(), ExpertOptions(), {}
+    options, expert, gnn, env = EvaluateOptions(), ExpertOptions(), GNNOptions(), {}
     env_keys = {f.name for f in fields(CoverageConfig)} - {"graph", "render_mode"}
     for arg in argv:
         if "=" not in arg:
@@ -70,24 +86,61 @@ def parse_overrides(argv: list[str]) -> tuple[EvaluateOptions, ExpertOptions, di
                     f"{sorted('expert.' + f.name for f in fields(ExpertOptions))}"
                 )
             setattr(expert, name, value)
+        elif key.startswith("gnn."):
+            name = key.removeprefix("gnn.")
+            if name not in {f.name for f in fields(GNNOptions)}:
+                raise SystemExit(
+                    f"unknown key {key!r}; gnn keys: "
+                    f"{sorted('gnn.' + f.name for f in fields(GNNOptions))}"
+                )
+            setattr(gnn, name, value)
         elif key in {f.name for f in fields(EvaluateOptions)}:
-            setattr(options, key, value if key != "out" else text)
+            setattr(options, key, value if key not in ("out", "checkpoint") else text)
         elif key in env_keys:
             env[key] = value if key != "map" else text
         else:
             raise SystemExit(
                 f"unknown key {key!r}; script keys "
                 f"{sorted(f.name for f in fields(EvaluateOptions))}, environment "
-                f"keys {sorted(env_keys)}, and expert.*"
+                f"keys {sorted(env_keys)}, expert.* and gnn.*"
             )
     if options.task != "coverage":
         raise SystemExit(f"task {options.task!r} is not available yet; tasks: ['coverage']")
     if options.policy not in POLICIES:
         raise SystemExit(f"unknown policy {options.policy!r}; policies: {list(POLICIES)}")
-    return options, expert, env
+    return options, expert, gnn, env
 
 
-def make_policy(options: EvaluateOptions, expert: ExpertOptions, hops: int) -> Any:
+def load_gnn(options: EvaluateOptions, env_overrides: dict[str, Any]) -> tuple[Any, dict]:
+    """The GNN to evaluate and its metadata; sets ``hops`` to the model's unless given."""
+    import torch
+
+    from agents.models.policy import load_model
+    from agents.models.shipped import shipped_model_path
+
+    torch.set_num_threads(1)  # controller times are quoted for one thread
+    path = options.checkpoint or shipped_model_path(options.task)
+    try:
+        model, metadata = load_model(path)
+    except (FileNotFoundError, ValueError) as error:
+        raise SystemExit(str(error)) from error
+    env_overrides.setdefault("hops", model.config.hops)
+    if env_overrides["hops"] < model.config.hops:
+        print(
+            f"note: ego-graphs of {env_overrides['hops']} hops are smaller than the model's "
+            f"receptive field ({model.config.hops})",
+            file=sys.stderr,
+        )
+    return model, {"path": str(path), **metadata}
+
+
+def make_policy(
+    options: EvaluateOptions, expert: ExpertOptions, hops: int, gnn: GNNOptions, model: Any = None
+) -> Any:
+    if options.policy == "gnn":
+        from agents.models.policy import GNNPolicy
+
+        return GNNPolicy(model, centralized=gnn.centralized, deterministic=gnn.deterministic)
     if options.policy in ("greedy", "greedy_central"):
         from agents.greedy import CentralizedGreedyPolicy, GreedyPolicy
 
@@ -107,9 +160,12 @@ def make_policy(options: EvaluateOptions, expert: ExpertOptions, hops: int) -> A
 
 
 def main(argv: list[str]) -> None:
-    options, expert, env_overrides = parse_overrides(argv)
+    options, expert, gnn, env_overrides = parse_overrides(argv)
+    model, model_info = (
+        load_gnn(options, env_overrides) if options.policy == "gnn" else (None, None)
+    )
     env = parallel_env(**env_overrides)
-    policy = make_policy(options, expert, env.config.hops)
+    policy = make_policy(options, expert, env.config.hops, gnn, model)
     seeds = range(options.seed, options.seed + options.episodes)
     try:
         from tqdm import tqdm
@@ -122,6 +178,7 @@ def main(argv: list[str]) -> None:
     record = {
         "options": asdict(options),
         "expert": asdict(expert) if options.policy.startswith("expert") else None,
+        "gnn": {**asdict(gnn), **model_info} if model_info is not None else None,
         "env": {k: v for k, v in asdict(env.config).items() if k != "graph"},
         "summary": summary.as_dict(),
     }

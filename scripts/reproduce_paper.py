@@ -1,8 +1,10 @@
-"""The paper's Fig. "coverage" sweeps: greedy and the receding-horizon expert against K.
+"""The paper's Fig. "coverage" sweeps: greedy, the receding-horizon expert and the GNNs against K.
 
 Runs each method for K = 3, 5, ..., 19 on 100 seeded windows of the paper's map (4 robots,
 T = 50; greedy also with T = 49, what the paper's code ran), prints mean +- SEM beside
-``shared/reference/paper_results.csv`` and draws mean +- SEM against K to a PNG.
+``shared/reference/paper_results.csv`` and draws mean +- SEM against K to a PNG. The GNN rows
+(``gnn_linear``, ``gnn_nonlinear``) evaluate ``MODELS/<kind>_k<K>/best.pt`` (decentralized,
+argmax), as trained by ``scripts/train_bc.py``.
 
 Each (method, K) result is written to ``OUT/<method>_K<k>.json`` as soon as it is done and is
 skipped when present, so the sweep resumes after an interrupt and can be split over processes
@@ -11,6 +13,7 @@ is there.
 
     python scripts/reproduce_paper.py [--methods greedy expert_rh] [--hops 3 5 ... 19]
         [--episodes 100] [--expert-time-limit 0.15] [--backend pyvrp] [--out outputs/paper]
+    python scripts/reproduce_paper.py --methods gnn_linear gnn_nonlinear --models outputs/bc
 """
 
 from __future__ import annotations
@@ -36,6 +39,8 @@ PAPER_CSV = (
 METHODS = {
     "greedy": ("greedy", (50, 49)),
     "expert_rh": ("expert_receding_horizon", (50,)),
+    "gnn_linear": ("gnn_linear_bc", (50,)),
+    "gnn_nonlinear": ("gnn_nonlinear_bc", (50,)),
 }
 
 
@@ -54,9 +59,21 @@ def paper_numbers(path: Path, task: str = "coverage") -> dict[tuple[str, int], t
         }
 
 
+def model_path(method: str, hops: int, args: argparse.Namespace) -> Path:
+    return args.models / f"{method.removeprefix('gnn_')}_k{hops}" / "best.pt"
+
+
 def make_policy(method: str, hops: int, args: argparse.Namespace):  # noqa: ANN201
     if method == "greedy":
         return GreedyPolicy(hops, fallback="random")
+    if method.startswith("gnn_"):
+        import torch
+
+        from agents.models.policy import GNNPolicy, load_model
+
+        torch.set_num_threads(1)
+        model, _ = load_model(model_path(method, hops, args))
+        return GNNPolicy(model)
     from agents.experts import RoutingExpert
 
     return RoutingExpert(
@@ -69,6 +86,11 @@ def run(method: str, hops: int, args: argparse.Namespace) -> dict:
     record: dict = {"method": method, "hops": hops, "episodes": args.episodes, "seed": args.seed}
     if method == "expert_rh":
         record["expert"] = {"backend": args.backend, "time_limit": args.expert_time_limit}
+    if method.startswith("gnn_"):
+        from agents.models.policy import load_model
+
+        _, metadata = load_model(model_path(method, hops, args))
+        record["model"] = {"path": str(model_path(method, hops, args)), **metadata}
     for steps in METHODS[method][1]:
         env = parallel_env(map="paper", hops=hops, max_steps=steps)
         summary = evaluate(env, make_policy(method, hops, args), seeds)
@@ -91,6 +113,7 @@ def main() -> None:
     parser.add_argument("--backend", default="pyvrp", choices=["pyvrp", "ortools"])
     parser.add_argument("--expert-time-limit", type=float, default=0.15)
     parser.add_argument("--out", type=Path, default=Path("outputs/paper"))
+    parser.add_argument("--models", type=Path, default=Path("outputs/bc"), help="GNN runs")
     parser.add_argument("--table-only", action="store_true")
     args = parser.parse_args()
     if not args.table_only:
@@ -98,6 +121,9 @@ def main() -> None:
             for hops in args.hops:
                 path = args.out / f"{method}_K{hops}.json"
                 if path.exists():
+                    continue
+                if method.startswith("gnn_") and not model_path(method, hops, args).exists():
+                    print(f"skip {method} K={hops}: no {model_path(method, hops, args)}")
                     continue
                 write_text_atomic(path, json.dumps(run(method, hops, args), indent=2))
                 print(f"done {method} K={hops}", flush=True)
@@ -117,7 +143,7 @@ def print_table(records: list[dict]) -> None:
         for steps in lengths:
             columns.append((f"{method} T={steps}", method, f"T{steps}"))
         columns.append((f"paper {method}", paper_name, "paper"))
-    print(header + "".join(f"{name:>22}" for name, *_ in columns))
+    print(header + "".join(f"{name:>20}" for name, *_ in columns))
     for hops in HOPS:
         cells = []
         for _, method, key in columns:
@@ -126,8 +152,8 @@ def print_table(records: list[dict]) -> None:
             else:
                 record = by_key.get((method, hops), {}).get(key)
                 value = (record["mean"], record["sem"]) if record else None
-            cells.append(f"{value[0]:7.1f} +- {value[1]:4.2f}" if value else "-")
-        print(f"{hops:>3}" + "".join(f"{c:>22}" for c in cells))
+            cells.append(f"{value[0]:6.1f} +- {value[1]:4.2f}" if value else "-")
+        print(f"{hops:>3}" + "".join(f"{c:>20}" for c in cells))
 
 
 def plot(records: list[dict], path: Path) -> None:
@@ -138,7 +164,7 @@ def plot(records: list[dict], path: Path) -> None:
 
     paper = paper_numbers(PAPER_CSV)
     fig, ax = plt.subplots(figsize=(7, 4.5), dpi=120)
-    for colour, (method, (paper_name, lengths)) in zip("br", METHODS.items(), strict=False):
+    for colour, (method, (paper_name, lengths)) in zip("brgm", METHODS.items(), strict=False):
         points = sorted(
             (r["hops"], r[f"T{lengths[0]}"]["mean"], r[f"T{lengths[0]}"]["sem"])
             for r in records

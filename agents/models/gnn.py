@@ -13,6 +13,14 @@ The decoded edge latents of every stage are concatenated and a linear readout gi
 per edge; a robot's action logits are those of its five action edges (target -> robot), and a
 masked categorical over them is its policy. Aggregation is ``index_add_`` over a flat graph:
 a batch of padded graphs is flattened with node offsets, and padded edges are dropped.
+
+Speed (the arithmetic is tiny, so the cost is the number of torch calls and the edge-sized
+work): the decoder and readout run only on the edges whose logits are asked for (a policy needs
+five per robot, not one per edge), all stages in one call; the first layer of the edge MLP is
+split into an edge part and two node parts computed per node before the gather (it is linear in
+its inputs); the linear model's diffusion is one sparse ``(V, V)`` mean operator applied
+``hops - 1`` times. :meth:`AggregationGNN.reference_forward` is the plain formula, kept for the
+tests that check the fast path against it.
 """
 
 from __future__ import annotations
@@ -21,6 +29,7 @@ from dataclasses import dataclass
 
 import torch
 from torch import nn
+from torch.nn import functional
 
 from marl_cover.ego import NUM_ACTIONS, NUM_NODE_FEATURES
 
@@ -38,6 +47,8 @@ class GNNConfig:
         mlp_layers: Linear layers per MLP (ReLU after all but the last).
         node_features: Input node features.
         edge_features: Input edge features.
+        residual: Non-linear model only: add each block's output to its input latents (off in
+            the paper).
     """
 
     kind: str = "nonlinear"
@@ -46,12 +57,15 @@ class GNNConfig:
     mlp_layers: int = 3
     node_features: int = NUM_NODE_FEATURES
     edge_features: int = 1
+    residual: bool = False
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
             raise ValueError(f"kind must be one of {KINDS}, got {self.kind!r}")
         if self.hops < 1 or self.hidden < 1 or self.mlp_layers < 1:
             raise ValueError("hops, hidden and mlp_layers must be >= 1")
+        if self.residual and self.kind == "linear":
+            raise ValueError("residual applies to the non-linear model only")
 
 
 def mlp(inputs: int, hidden: int, layers: int) -> nn.Sequential:
@@ -64,6 +78,13 @@ def mlp(inputs: int, hidden: int, layers: int) -> nn.Sequential:
     return nn.Sequential(*modules)
 
 
+def _tail(layers: nn.Sequential, x: torch.Tensor) -> torch.Tensor:
+    """Runs an :func:`mlp` from after its first linear layer (``x`` is that layer's output)."""
+    for module in list(layers)[1:]:
+        x = torch.relu_(x) if isinstance(module, nn.ReLU) else module(x)
+    return x
+
+
 def mean_aggregate(
     messages: torch.Tensor, receivers: torch.Tensor, num_nodes: int, inverse_degree: torch.Tensor
 ) -> torch.Tensor:
@@ -72,8 +93,18 @@ def mean_aggregate(
     return total * inverse_degree
 
 
+def mean_operator(edge_index: torch.Tensor, num_nodes: int, dtype: torch.dtype) -> torch.Tensor:
+    """Sparse ``(V, V)`` matrix ``A`` with ``(A h)_i`` = mean of ``h_j`` over edges ``j -> i``."""
+    senders, receivers = edge_index[0], edge_index[1]
+    degree = torch.bincount(receivers, minlength=num_nodes).clamp(min=1).to(dtype)
+    values = 1.0 / degree[receivers]
+    return torch.sparse_coo_tensor(
+        torch.stack([receivers, senders]), values, (num_nodes, num_nodes), check_invariants=False
+    ).coalesce()
+
+
 class AggregationGNN(nn.Module):
-    """One logit per edge of a graph of robots and waypoints (see the module docstring)."""
+    """Edge logits of a graph of robots and waypoints (see the module docstring)."""
 
     def __init__(self, config: GNNConfig | None = None) -> None:
         super().__init__()
@@ -90,18 +121,102 @@ class AggregationGNN(nn.Module):
         nn.init.zeros_(self.readout.bias)
 
     def forward(
-        self, nodes: torch.Tensor, edge_index: torch.Tensor, edge_attr: torch.Tensor
+        self,
+        nodes: torch.Tensor,
+        edge_index: torch.Tensor,
+        edge_attr: torch.Tensor,
+        out_edges: torch.Tensor | None = None,
     ) -> torch.Tensor:
-        """Edge logits of one flat graph.
+        """Logits of some edges of one flat graph.
 
         Args:
             nodes: ``(V, node_features)`` float.
             edge_index: ``(2, E)`` long, ``[sender; receiver]``.
             edge_attr: ``(E, edge_features)`` float.
+            out_edges: ``(O,)`` long ids of the edges whose logits are wanted (all by default).
 
         Returns:
-            ``(E,)`` logits.
+            ``(O,)`` logits (``(E,)`` without ``out_edges``).
         """
+        if out_edges is None:
+            out_edges = torch.arange(edge_index.shape[1], device=edge_index.device)
+        if self.config.kind == "linear":
+            stages = self._linear_stages(nodes, edge_index, edge_attr, out_edges)
+        else:
+            stages = self._nonlinear_stages(nodes, edge_index, edge_attr, out_edges)
+        return self._readout(torch.stack(stages))
+
+    def _readout(self, stages: torch.Tensor) -> torch.Tensor:
+        """Decodes ``(S, O, H)`` stage latents in one call; the readout sums over stages."""
+        num_stages, num_out, hidden = stages.shape
+        decoded = self.edge_decoder(stages.reshape(-1, hidden)).view(num_stages, num_out, hidden)
+        weight = self.readout.weight.view(num_stages, hidden)
+        return torch.einsum("soh,sh->o", decoded, weight) + self.readout.bias
+
+    def _linear_stages(
+        self,
+        nodes: torch.Tensor,
+        edge_index: torch.Tensor,
+        edge_attr: torch.Tensor,
+        out_edges: torch.Tensor,
+    ) -> list[torch.Tensor]:
+        # stage 0: the encoded edge; stage k >= 1: the sender's latent after k - 1 diffusions
+        stages = [self.edge_encoder(edge_attr[out_edges])]
+        h = self.node_encoder(nodes)
+        out_senders = edge_index[0, out_edges]
+        operator = (
+            mean_operator(edge_index, nodes.shape[0], h.dtype) if self.config.hops > 1 else None
+        )
+        for hop in range(self.config.hops):
+            stages.append(h[out_senders])
+            if hop < self.config.hops - 1:
+                h = torch.sparse.mm(operator, h)
+        return stages
+
+    def _nonlinear_stages(
+        self,
+        nodes: torch.Tensor,
+        edge_index: torch.Tensor,
+        edge_attr: torch.Tensor,
+        out_edges: torch.Tensor,
+    ) -> list[torch.Tensor]:
+        senders, receivers = edge_index[0], edge_index[1]
+        num_nodes, hidden = nodes.shape[0], self.config.hidden
+        degree = torch.bincount(receivers, minlength=num_nodes).clamp(min=1)
+        inverse_degree = (1.0 / degree.to(nodes.dtype)).unsqueeze(1)
+        edge_first, node_first = self.edge_block[0], self.node_block[0]
+        w_edge, w_receiver, w_sender = edge_first.weight.split(hidden, dim=1)
+        w_node_pair = torch.cat([w_receiver, w_sender], dim=0)  # (2H, H)
+        w_aggregate, w_self = node_first.weight.split(hidden, dim=1)
+        # row 2 i of the (2 V, H) view of h @ [W_receiver; W_sender]^T is node i's receiver part,
+        # row 2 i + 1 its sender part: one gather per hop fetches both for every edge
+        pair_rows = torch.stack([2 * receivers, 2 * senders + 1])  # (2, E)
+        pair_rows = pair_rows.reshape(-1)
+        num_edges = senders.shape[0]
+        h = self.node_encoder(nodes)
+        e = self.edge_encoder(edge_attr)
+        stages = [e[out_edges]]
+        for hop in range(self.config.hops):
+            pair = functional.linear(h, w_node_pair).view(2 * num_nodes, hidden)
+            gathered = pair.index_select(0, pair_rows).view(2, num_edges, hidden)
+            first = torch.addmm(edge_first.bias, e, w_edge.t())
+            first += gathered[0]
+            first += gathered[1]
+            e_new = _tail(self.edge_block, first)
+            e = e_new + e if self.config.residual else e_new
+            stages.append(e.index_select(0, out_edges))
+            if hop == self.config.hops - 1:
+                break  # the last node update reaches no output
+            aggregate = mean_aggregate(e_new, receivers, num_nodes, inverse_degree)
+            first = torch.addmm(node_first.bias, aggregate, w_aggregate.t())
+            h_new = _tail(self.node_block, torch.addmm(first, h, w_self.t()))
+            h = h_new + h if self.config.residual else h_new
+        return stages
+
+    def reference_forward(
+        self, nodes: torch.Tensor, edge_index: torch.Tensor, edge_attr: torch.Tensor
+    ) -> torch.Tensor:
+        """The plain formula for every edge's logit (slow; the tests' ground truth)."""
         senders, receivers = edge_index[0], edge_index[1]
         num_nodes = nodes.shape[0]
         degree = torch.bincount(receivers, minlength=num_nodes).clamp(min=1)
@@ -114,10 +229,13 @@ class AggregationGNN(nn.Module):
                 e = h[senders]
                 h = mean_aggregate(e, receivers, num_nodes, inverse_degree)
             else:
-                e = self.edge_block(torch.cat([e, h[receivers], h[senders]], dim=1))
-                h = self.node_block(
-                    torch.cat([mean_aggregate(e, receivers, num_nodes, inverse_degree), h], 1)
+                e_new = self.edge_block(torch.cat([e, h[receivers], h[senders]], dim=1))
+                h_new = self.node_block(
+                    torch.cat([mean_aggregate(e_new, receivers, num_nodes, inverse_degree), h], 1)
                 )
+                if self.config.residual:
+                    e_new, h_new = e_new + e, h_new + h
+                e, h = e_new, h_new
             stages.append(self.edge_decoder(e))
         return self.readout(torch.cat(stages, dim=1)).squeeze(1)
 
@@ -143,16 +261,20 @@ def flatten_padded(batch: dict[str, torch.Tensor]) -> tuple[torch.Tensor, ...]:
     return nodes.reshape(-1, nodes.shape[-1]), flat_index, flat_attr, action_edges
 
 
-def action_logits(edge_logits: torch.Tensor, action_edges: torch.Tensor) -> torch.Tensor:
-    """Logits of each robot's five actions ``(R, 5)``; ``-inf`` where an edge id is ``-1``."""
-    picked = edge_logits[action_edges.clamp(min=0)]
-    return picked.masked_fill(action_edges < 0, float("-inf"))
+def action_logits(
+    model: AggregationGNN,
+    graph: tuple[torch.Tensor, torch.Tensor, torch.Tensor],
+    action_edges: torch.Tensor,
+) -> torch.Tensor:
+    """Logits ``(R, 5)`` of the action edges ``(R, 5)`` of a flat graph; ``-inf`` where ``-1``."""
+    picked = model(*graph, out_edges=action_edges.clamp(min=0).reshape(-1))
+    return picked.view(action_edges.shape).masked_fill(action_edges < 0, float("-inf"))
 
 
 def decentralized_logits(model: AggregationGNN, batch: dict[str, torch.Tensor]) -> torch.Tensor:
     """Action logits ``(B, 5)`` of each ego robot from its padded ego-graph (node 0)."""
     nodes, edge_index, edge_attr, action_edges = flatten_padded(batch)
-    return action_logits(model(nodes, edge_index, edge_attr), action_edges)
+    return action_logits(model, (nodes, edge_index, edge_attr), action_edges)
 
 
 def centralized_logits(model: AggregationGNN, state: dict[str, torch.Tensor]) -> torch.Tensor:
@@ -164,4 +286,4 @@ def centralized_logits(model: AggregationGNN, state: dict[str, torch.Tensor]) ->
     new_id = torch.cumsum(keep.long(), 0) - 1
     heads = torch.arange(NUM_ACTIONS * num_robots, device=keep.device).view(num_robots, -1)
     action_edges = torch.where(keep[heads], new_id[heads], torch.full_like(heads, -1))
-    return action_logits(model(nodes, edge_index, edge_attr), action_edges)
+    return action_logits(model, (nodes, edge_index, edge_attr), action_edges)

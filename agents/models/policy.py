@@ -1,0 +1,201 @@
+"""The GNN as a policy: TensorDict modules for training loops, an evaluation policy, checkpoints.
+
+- :class:`EgoGraphLogits` maps padded ego-graph observations (any leading batch shape, such as
+  ``(robots,)`` or ``(envs, robots)``) to action logits and a boolean action mask;
+  :func:`make_actor` wraps it as a TorchRL ``ProbabilisticActor`` with a ``MaskedCategorical``
+  (the module that behaviour cloning and MAPPO share).
+- :class:`GNNPolicy` plays in the evaluation harness: decentralized (each robot on its own
+  ego-graph, :meth:`GNNPolicy.act`) or centralized (one pass on ``state()``,
+  :meth:`GNNPolicy.act_state`), greedy (argmax) by default.
+- :func:`save_model` / :func:`load_model`: a model file carries its :class:`GNNConfig` and any
+  metadata (command, seed, dataset), written atomically.
+"""
+
+from __future__ import annotations
+
+import io
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+
+from agents.cli import write_bytes_atomic
+from agents.models.gnn import AggregationGNN, GNNConfig, centralized_logits, decentralized_logits
+from marl_cover.ego import NUM_ACTIONS
+
+#: Keys of a padded graph observation read by the policy.
+GRAPH_KEYS = ("nodes", "edge_index", "edge_attr", "edge_mask", "action_mask")
+
+
+class EgoGraphLogits(nn.Module):
+    """Action logits ``(..., 5)`` and mask ``(..., 5)`` bool from padded ego-graphs ``(..., M, *)``.
+
+    Masked actions get logit 0 (finite, so that entropies and gradients stay clean); the mask
+    output is what a ``MaskedCategorical`` must read.
+    """
+
+    def __init__(self, gnn: AggregationGNN) -> None:
+        super().__init__()
+        self.gnn = gnn
+
+    def forward(
+        self,
+        nodes: torch.Tensor,
+        edge_index: torch.Tensor,
+        edge_attr: torch.Tensor,
+        edge_mask: torch.Tensor,
+        action_mask: torch.Tensor,
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        lead = nodes.shape[:-2]
+        batch = {
+            "nodes": nodes.reshape(-1, *nodes.shape[-2:]),
+            "edge_index": edge_index.reshape(-1, *edge_index.shape[-2:]),
+            "edge_attr": edge_attr.reshape(-1, *edge_attr.shape[-2:]),
+            "edge_mask": edge_mask.reshape(-1, edge_mask.shape[-1]),
+        }
+        logits = decentralized_logits(self.gnn, batch)  # (B, 5), -inf where no action edge
+        mask = action_mask.reshape(-1, NUM_ACTIONS).bool() & torch.isfinite(logits)
+        logits = logits.masked_fill(~mask, 0.0)
+        return logits.view(*lead, NUM_ACTIONS), mask.view(*lead, NUM_ACTIONS)
+
+
+def make_actor(
+    gnn: AggregationGNN,
+    observation_key: Any = "observation",
+    action_key: Any = "action",
+    mask_key: Any = None,
+) -> Any:
+    """A TorchRL ``ProbabilisticActor`` over ``EgoGraphLogits`` with a ``MaskedCategorical``.
+
+    Args:
+        gnn: The shared network.
+        observation_key: Key (or nested key, e.g. ``("robot", "observation")``) under which the
+            padded ego-graph entries (:data:`GRAPH_KEYS`) live.
+        action_key: Where the sampled action goes; logits, mask and log-probability are written
+            beside it (``"logits"``, ``"mask"``, ``"sample_log_prob"`` under the same prefix).
+        mask_key: Where the action mask is read (default: ``action_mask`` inside the
+            observation; TorchRL's ``PettingZooWrapper`` lifts it to ``(group, "action_mask")``).
+    """
+    from tensordict.nn import TensorDictModule
+    from torchrl.modules import MaskedCategorical, ProbabilisticActor
+
+    def beside(name: str) -> Any:
+        return (*action_key[:-1], name) if isinstance(action_key, tuple) else name
+
+    prefix = observation_key if isinstance(observation_key, tuple) else (observation_key,)
+    module = TensorDictModule(
+        EgoGraphLogits(gnn),
+        in_keys=[(*prefix, key) for key in GRAPH_KEYS[:-1]]
+        + [mask_key if mask_key is not None else (*prefix, "action_mask")],
+        out_keys=[beside("logits"), beside("mask")],
+    )
+    return ProbabilisticActor(
+        module,
+        in_keys={"logits": beside("logits"), "mask": beside("mask")},
+        out_keys=[action_key],
+        distribution_class=MaskedCategorical,
+        return_log_prob=True,
+        log_prob_key=beside("sample_log_prob"),
+    )
+
+
+class GNNPolicy:
+    """The GNN in the evaluation harness.
+
+    The two modes compute the same logits up to float rounding (the sums run in another
+    order), so in float32 an action whose logit ties another within ~1e-6 can differ between
+    them; a float64 model (``model.double()``) gives the same actions in both.
+
+    Args:
+        model: A trained network.
+        centralized: Decide all robots in one pass over ``state()`` instead of one ego-graph
+            per robot (same actions; faster for large teams).
+        deterministic: Argmax (default) or sample from the masked categorical.
+        seed: Seed of the sampling generator (reset with each episode's seed).
+    """
+
+    def __init__(
+        self,
+        model: AggregationGNN,
+        centralized: bool = False,
+        deterministic: bool = True,
+        seed: int = 0,
+    ) -> None:
+        self.model = model.eval()
+        self._dtype = next(model.parameters()).dtype
+        self.centralized = centralized
+        self.deterministic = deterministic
+        self._generator = torch.Generator().manual_seed(seed)
+        if centralized:
+            self.act_state = self._act_state
+
+    def reset(self, seed: int | None = None) -> None:
+        if seed is not None:
+            self._generator.manual_seed(seed)
+
+    def _choose(self, logits: torch.Tensor) -> np.ndarray:
+        if self.deterministic:
+            return logits.argmax(dim=-1).numpy()
+        probs = torch.softmax(logits, dim=-1)
+        return torch.multinomial(probs, 1, generator=self._generator).squeeze(-1).numpy()
+
+    @torch.inference_mode()
+    def logits(self, observations: dict[str, dict[str, np.ndarray]]) -> torch.Tensor:
+        """Action logits ``(R, 5)`` (``-inf`` for masked actions) from per-agent ego-graphs."""
+        agents = list(observations)
+        batch = {
+            key: self._tensor(np.stack([observations[a][key] for a in agents]))
+            for key in GRAPH_KEYS[:-1]
+        }
+        return decentralized_logits(self.model, batch)
+
+    def _tensor(self, array: np.ndarray) -> torch.Tensor:
+        tensor = torch.from_numpy(array)
+        return tensor.to(self._dtype) if tensor.is_floating_point() else tensor
+
+    def act(self, observations: dict[str, dict[str, np.ndarray]]) -> dict[str, int]:
+        """Each robot's action from its own ego-graph (decentralized)."""
+        actions = self._choose(self.logits(observations))
+        return dict(zip(observations, actions.tolist(), strict=True))
+
+    @torch.inference_mode()
+    def _act_state(self, state: dict[str, np.ndarray]) -> np.ndarray:
+        """Every robot's action ``(R,)`` from one pass over ``state()`` (centralized)."""
+        tensors = {key: self._tensor(value) for key, value in state.items()}
+        return self._choose(centralized_logits(self.model, tensors))
+
+
+def save_model(path: str | Path, model: AggregationGNN, metadata: dict[str, Any]) -> None:
+    """Writes ``model`` with its config and ``metadata`` to ``path`` atomically."""
+    buffer = io.BytesIO()
+    torch.save(
+        {
+            "gnn_config": asdict(model.config),
+            "state_dict": model.state_dict(),
+            "metadata": metadata,
+        },
+        buffer,
+    )
+    write_bytes_atomic(path, buffer.getvalue())
+
+
+def load_model(path: str | Path) -> tuple[AggregationGNN, dict[str, Any]]:
+    """The network saved at ``path`` (by :func:`save_model` or a training checkpoint).
+
+    Raises:
+        FileNotFoundError: no file at ``path``.
+        ValueError: the file is not a model file, naming it and the missing key.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"no model file at {path}")
+    record = torch.load(path, map_location="cpu", weights_only=False)
+    for key in ("gnn_config", "state_dict"):
+        if not isinstance(record, dict) or key not in record:
+            raise ValueError(f"{path} is not a model file (no {key!r} entry)")
+    model = AggregationGNN(GNNConfig(**record["gnn_config"]))
+    model.load_state_dict(record["state_dict"])
+    return model.eval(), dict(record.get("metadata", {}))

@@ -1,0 +1,1 @@
+"""Training loops (needs the ``train`` extra: torch, torchrl, tensordict)."""

@@ -1,0 +1,408 @@
+"""Behaviour cloning of the routing expert, with DAgger as an option.
+
+The recipe (defaults: the paper's, ``reference_impl.md`` section 4.2, except that every recorded
+episode is used instead of the first 200):
+
+1. Load the expert dataset; drop the episodes whose seeds are held out for evaluation
+   (``holdout_seeds``: the harness's seeds 0..99 are also dataset seeds); split the rest by
+   episode into train and validation.
+2. Store the transitions in a TorchRL replay buffer (``LazyTensorStorage``, sampling without
+   replacement: epochs) and collate each batch into one flat graph of whole-graph states.
+3. Minimise the cross-entropy of the expert's action over every robot of the batch (minus
+   ``entropy_coef`` times the entropy), Adam, learning rate ``lr * lr_decay ** (step /
+   lr_decay_every)``.
+4. Every ``val_every`` steps: validation cross-entropy and accuracy, the mean reward of the
+   greedy (argmax) policy on ``select_episodes`` selection episodes (seeds from
+   ``select_seed``, disjoint from the dataset and the test seeds), a resumable checkpoint, and
+   ``best.pt`` when the selection reward improves.
+5. DAgger (``dagger.rounds > 0``; ``init`` and ``steps=0`` run it from an earlier model):
+   play the current policy (executing the expert's action with probability ``beta``,
+   decaying per round), label every visited state with the expert
+   re-planned from that state, add the labelled states to the buffer (and to disk, as dataset
+   shards), and train ``dagger.steps`` more steps with a fresh learning-rate schedule.
+
+Resuming: ``checkpoint.pt`` holds the model, the optimiser, the sampler, the RNG states and the
+phase; DAgger rounds already labelled are read back from ``out/dagger``.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch.nn import functional
+
+from agents import configuration
+from agents.cli import write_text_atomic
+from agents.datasets import SHARD_PATTERN, Episode, load_dataset, read_shard, write_shard
+from agents.evaluation import evaluate
+from agents.models.gnn import AggregationGNN, GNNConfig, action_logits
+from agents.models.policy import GNNPolicy, load_model, save_model
+from agents.training.data import GraphTable, collate_states, episode_transitions
+from marl_cover.env import CoverageEnv
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass
+class DaggerConfig:
+    """DAgger rounds after the initial behaviour cloning (``rounds = 0``: off).
+
+    Attributes:
+        rounds: Rounds of roll-out, labelling and retraining.
+        episodes: Episodes rolled out per round.
+        beta: Probability of executing the expert's action at a step, first round.
+        beta_decay: ``beta`` is multiplied by this after each round.
+        steps: Training steps after each round.
+        iterations: Expert solver iterations per label (PyVRP; deterministic labels).
+        seed: First roll-out episode seed (rounds use consecutive blocks).
+    """
+
+    rounds: int = 0
+    episodes: int = 50
+    beta: float = 0.5
+    beta_decay: float = 0.5
+    steps: int = 3000
+    iterations: int = 500
+    seed: int = 1_000_000
+
+
+@dataclass
+class BCConfig:
+    """Behaviour cloning settings (see the module docstring for the recipe)."""
+
+    dataset: str = "data/coverage_expert"
+    out: str = "outputs/bc/run"
+    model: GNNConfig = field(default_factory=GNNConfig)
+    init: str | None = None  # start from this model file (its config must equal ``model``)
+    env: dict[str, Any] = field(default_factory=lambda: {"map": "paper"})
+    batch_size: int = 32
+    lr: float = 1e-3
+    lr_decay: float = 0.95
+    lr_decay_every: int = 200
+    steps: int = 20_000
+    entropy_coef: float = 0.0
+    max_episodes: int | None = None
+    holdout_seeds: list[int] = field(default_factory=lambda: [0, 100])  # [first, stop)
+    val_fraction: float = 0.05
+    val_every: int = 1000
+    select_episodes: int = 20
+    select_seed: int = 10_000
+    seed: int = 0
+    threads: int = 1
+    logger: str = "csv"
+    progress: bool = True
+    dagger: DaggerConfig = field(default_factory=DaggerConfig)
+
+    def __post_init__(self) -> None:
+        if self.batch_size < 1 or self.steps < 0 or self.val_every < 1:
+            raise ValueError("batch_size and val_every must be >= 1 and steps >= 0")
+        if not 0.0 < self.val_fraction < 1.0:
+            raise ValueError(f"val_fraction must be in (0, 1), got {self.val_fraction}")
+        if self.logger not in ("csv", "tensorboard", "none"):
+            raise ValueError(f"logger must be csv, tensorboard or none, got {self.logger!r}")
+        if len(self.holdout_seeds) != 2:
+            raise ValueError("holdout_seeds is [first, stop)")
+
+    @property
+    def total_steps(self) -> int:
+        return self.steps + self.dagger.rounds * self.dagger.steps
+
+
+# ---------------------------------------------------------------------------- data
+def split_episodes(config: BCConfig) -> tuple[list[Episode], list[Episode]]:
+    """Train and validation episodes of the dataset (held-out seeds removed, split by episode)."""
+    first, stop = config.holdout_seeds
+    episodes = [e for e in load_dataset(config.dataset) if not first <= e.seed < stop]
+    if config.max_episodes is not None:
+        episodes = episodes[: config.max_episodes]
+    if len(episodes) < 2:
+        raise ValueError(f"{config.dataset}: {len(episodes)} usable episodes, need >= 2")
+    order = np.random.default_rng(config.seed).permutation(len(episodes))
+    num_val = max(1, round(config.val_fraction * len(episodes)))
+    val = [episodes[i] for i in sorted(order[:num_val])]
+    train = [episodes[i] for i in sorted(order[num_val:])]
+    return train, val
+
+
+def make_buffer(capacity: int, batch_size: int) -> Any:
+    """A TorchRL replay buffer sampling stored transitions without replacement (epochs)."""
+    from torchrl.data import LazyTensorStorage, ReplayBuffer
+    from torchrl.data.replay_buffers import SamplerWithoutReplacement
+
+    return ReplayBuffer(
+        storage=LazyTensorStorage(capacity),
+        sampler=SamplerWithoutReplacement(),
+        batch_size=batch_size,
+    )
+
+
+def batch_loss(
+    model: AggregationGNN, batch: Any, table: GraphTable, entropy_coef: float = 0.0
+) -> tuple[torch.Tensor, dict[str, float]]:
+    """Mean cross-entropy of the expert's actions over every robot of a batch of transitions."""
+    nodes, edge_index, edge_attr, action_edges = collate_states(batch, table)
+    logits = action_logits(model, (nodes, edge_index, edge_attr), action_edges)  # (B*R, 5)
+    target = batch["action"].reshape(-1)
+    cross_entropy = functional.cross_entropy(logits, target)
+    log_probs = torch.log_softmax(logits, dim=-1)
+    probs = log_probs.exp()
+    entropy = -(probs * log_probs.masked_fill(probs == 0, 0.0)).sum(-1).mean()
+    loss = cross_entropy - entropy_coef * entropy
+    accuracy = (logits.argmax(-1) == target).float().mean()
+    return loss, {
+        "cross_entropy": float(cross_entropy.detach()),
+        "entropy": float(entropy.detach()),
+        "accuracy": float(accuracy),
+    }
+
+
+@torch.no_grad()
+def validate(model: AggregationGNN, data: Any, table: GraphTable, chunk: int = 512) -> dict:
+    """Cross-entropy and accuracy over all validation transitions."""
+    model.eval()
+    totals = {"cross_entropy": 0.0, "accuracy": 0.0}
+    for start in range(0, len(data), chunk):
+        batch = data[start : start + chunk]
+        _, metrics = batch_loss(model, batch, table)
+        for key in totals:
+            totals[key] += metrics[key] * len(batch)
+    model.train()
+    return {f"val_{key}": value / len(data) for key, value in totals.items()}
+
+
+def selection_reward(model: AggregationGNN, env: CoverageEnv, config: BCConfig) -> float:
+    """Mean reward of the argmax policy (centralized pass) on the selection episodes."""
+    seeds = range(config.select_seed, config.select_seed + config.select_episodes)
+    summary = evaluate(env, GNNPolicy(model, centralized=True), seeds)
+    model.train()
+    return summary.mean
+
+
+# ---------------------------------------------------------------------------- DAgger
+def dagger_round(
+    model: AggregationGNN, env: CoverageEnv, config: BCConfig, round_index: int
+) -> list[Episode]:
+    """Rolls out the mixed policy and labels every visited state with the expert.
+
+    The expert (open loop) re-plans whenever the robots are not where its plan expected, so its
+    label at a state the learner led to is the first hop of a fresh plan from that state.
+    """
+    from agents.experts import RoutingExpert
+
+    dagger = config.dagger
+    beta = dagger.beta * dagger.beta_decay**round_index
+    policy = GNNPolicy(model, centralized=True)
+    first = dagger.seed + round_index * dagger.episodes
+    episodes = []
+    for seed in range(first, first + dagger.episodes):
+        expert = RoutingExpert(max_iterations=dagger.iterations, seed=seed)
+        rng = np.random.default_rng(seed)
+        env.reset(seed=seed)
+        start = env.snapshot()
+        positions, labels = [start.robot_node.copy()], []
+        while env.agents:
+            label = expert.act_snapshot(env.snapshot())
+            learner = policy.act_state(env.state())
+            executed = np.where(rng.random(len(label)) < beta, label, learner)
+            labels.append(label)
+            env.step(dict(zip(env.possible_agents, executed.tolist(), strict=True)))
+            positions.append(env.snapshot().robot_node.copy())
+        episodes.append(
+            Episode(
+                seed=seed,
+                graph=start.graph,
+                interest=start.interest.copy(),
+                robot_node=np.array(positions, dtype=np.int64),
+                actions=np.array(labels, dtype=np.int8),
+                fallbacks=int(expert.counts.get("fallback_steps", 0)),
+            )
+        )
+    model.train()
+    return episodes
+
+
+# ---------------------------------------------------------------------------- checkpoints
+def _make_logger(config: BCConfig, out: Path) -> Any:
+    if config.logger == "none":
+        return None
+    if config.logger == "tensorboard":
+        from torchrl.record.loggers import TensorboardLogger
+
+        return TensorboardLogger(exp_name="log", log_dir=str(out))
+    from torchrl.record.loggers import CSVLogger
+
+    return CSVLogger(exp_name="log", log_dir=str(out))
+
+
+def _save_checkpoint(path: Path, state: dict[str, Any]) -> None:
+    import io
+
+    from agents.cli import write_bytes_atomic
+
+    buffer = io.BytesIO()
+    torch.save(state, buffer)
+    write_bytes_atomic(path, buffer.getvalue())
+
+
+def _phase(step: int, config: BCConfig) -> tuple[int, int]:
+    """(phase, step within the phase): phase 0 is BC, phase k the training after round k."""
+    if step < config.steps or config.dagger.rounds == 0:
+        return 0, step
+    offset = step - config.steps
+    return 1 + offset // config.dagger.steps, offset % config.dagger.steps
+
+
+# ---------------------------------------------------------------------------- the loop
+def train_bc(config: BCConfig) -> dict[str, Any]:
+    """Trains (or resumes) a behaviour-cloned GNN; returns a summary of the run.
+
+    Writes ``out/config.yaml``, ``out/checkpoint.pt`` (resumable), ``out/best.pt`` (best
+    selection reward), ``out/model.pt`` (final weights), ``out/log/`` (TorchRL logger) and
+    ``out/summary.json``.
+    """
+    import json
+
+    import yaml
+
+    out = Path(config.out)
+    out.mkdir(parents=True, exist_ok=True)
+    record = configuration.as_dict(config)
+    config_path = out / "config.yaml"
+    if config_path.exists():
+        previous = yaml.safe_load(config_path.read_text())
+        changed = sorted(
+            k
+            for k in set(previous) | set(record)
+            if k not in ("progress", "steps") and previous.get(k) != record.get(k)
+        )
+        if changed:
+            raise ValueError(
+                f"{out} holds a run with other settings ({changed}); use another out= or "
+                "delete the folder"
+            )
+    write_text_atomic(config_path, yaml.safe_dump(record, sort_keys=False))
+
+    # seeding: torch (initialisation, sampling order) and numpy (split) from one seed
+    torch.manual_seed(config.seed)
+    torch.set_num_threads(config.threads)
+
+    train, val = split_episodes(config)
+    env = CoverageEnv(**config.env)
+    max_nodes = max([e.graph.num_nodes for e in train + val] + [env.max_waypoints])
+    dagger_episodes = [
+        read_shard(out / "dagger" / SHARD_PATTERN.format(k))
+        for k in range(config.dagger.rounds)
+        if (out / "dagger" / SHARD_PATTERN.format(k)).exists()
+    ]
+    table = GraphTable([e.graph for e in train + val], max_nodes)
+    val_data = episode_transitions(val, max_nodes, first_index=len(train))
+    capacity = sum(e.num_steps for e in train) + config.dagger.rounds * config.dagger.episodes * (
+        env.config.max_steps
+    )
+    buffer = make_buffer(capacity, config.batch_size)
+    buffer.extend(episode_transitions(train, max_nodes))
+
+    def add_dagger(episodes: list[Episode]) -> None:
+        nonlocal table
+        first = len(table)
+        table = table.extended([e.graph for e in episodes])
+        buffer.extend(episode_transitions(episodes, max_nodes, first_index=first))
+
+    for episodes in dagger_episodes:
+        add_dagger(episodes)
+
+    model = AggregationGNN(config.model)
+    if config.init is not None:
+        start, _ = load_model(config.init)
+        if start.config != config.model:
+            raise ValueError(f"init {config.init} is a {start.config}, not model {config.model}")
+        model.load_state_dict(start.state_dict())
+    optimizer = torch.optim.Adam(model.parameters(), lr=config.lr)
+    step, best_reward = 0, -math.inf
+    checkpoint_path = out / "checkpoint.pt"
+    if checkpoint_path.exists():
+        state = torch.load(checkpoint_path, weights_only=False)
+        model.load_state_dict(state["model"])
+        optimizer.load_state_dict(state["optimizer"])
+        buffer.sampler.load_state_dict(state["sampler"])
+        torch.set_rng_state(state["torch_rng"])
+        step, best_reward = state["step"], state["best_reward"]
+        logger.info("resumed %s at step %d", out, step)
+    log = _make_logger(config, out)
+    metadata = {
+        "dataset": config.dataset,
+        "train_episodes": len(train),
+        "val_episodes": len(val),
+        "seed": config.seed,
+    }
+
+    progress = None
+    if config.progress:
+        from tqdm import tqdm
+
+        progress = tqdm(total=config.total_steps, initial=step, unit="batch", desc="bc")
+    model.train()
+    metrics: dict[str, float] = {}
+    while step < config.total_steps:
+        phase, phase_step = _phase(step, config)
+        if phase > 0 and phase_step == 0 and len(dagger_episodes) < phase:
+            episodes = dagger_round(model, env, config, phase - 1)
+            write_shard(out / "dagger" / SHARD_PATTERN.format(phase - 1), episodes)
+            dagger_episodes.append(episodes)
+            add_dagger(episodes)
+            reward = float(np.mean([e.reward() for e in episodes]))
+            if log is not None:
+                log.log_scalar("dagger_rollout_reward", reward, step=step)
+        for group in optimizer.param_groups:
+            group["lr"] = config.lr * config.lr_decay ** (phase_step / config.lr_decay_every)
+        loss, metrics = batch_loss(model, buffer.sample(), table, config.entropy_coef)
+        optimizer.zero_grad()
+        loss.backward()
+        optimizer.step()
+        step += 1
+        if progress is not None:
+            progress.update()
+            progress.set_postfix(ce=f"{metrics['cross_entropy']:.3f}")
+        if log is not None and step % 50 == 0:
+            for key, value in metrics.items():
+                log.log_scalar(f"train_{key}", value, step=step)
+            log.log_scalar("lr", optimizer.param_groups[0]["lr"], step=step)
+        if step % config.val_every == 0 or step == config.total_steps:
+            scores = validate(model, val_data, table)
+            scores["select_reward"] = selection_reward(model, env, config)
+            if scores["select_reward"] > best_reward:
+                best_reward = scores["select_reward"]
+                save_model(out / "best.pt", model, {**metadata, "step": step, **scores})
+            if log is not None:
+                for key, value in scores.items():
+                    log.log_scalar(key, value, step=step)
+            metrics.update(scores)
+            logger.info("step %d: %s", step, scores)
+            if progress is not None:
+                progress.write(
+                    f"step {step}: " + ", ".join(f"{k} {v:.4f}" for k, v in scores.items())
+                )
+            _save_checkpoint(
+                checkpoint_path,
+                {
+                    "model": model.state_dict(),
+                    "optimizer": optimizer.state_dict(),
+                    "sampler": buffer.sampler.state_dict(),
+                    "torch_rng": torch.get_rng_state(),
+                    "step": step,
+                    "best_reward": best_reward,
+                    "config": record,
+                },
+            )
+    if progress is not None:
+        progress.close()
+    save_model(out / "model.pt", model, {**metadata, "step": step})
+    summary = {"step": step, "best_select_reward": best_reward, **metadata, **metrics}
+    write_text_atomic(out / "summary.json", json.dumps(summary, indent=2))
+    return summary

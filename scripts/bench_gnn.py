@@ -1,0 +1,139 @@
+"""GNN controller time per step, beside the paper's; prints a table and writes JSON.
+
+Times the policy only (observations are recorded first): from the observation arrays to the
+actions, on one CPU thread (or ``--device cuda``), for the linear and non-linear models at each
+K. Rows: 4 robots on windows of the paper's map, each robot on its own ego-graph
+(decentralized) and all robots in one pass over ``state()`` (centralized); and 100 robots on
+the 5659-waypoint map, centralized, at K = 19. Weights are random: the time does not depend on
+them.
+
+    python scripts/bench_gnn.py [--hops 3 5 ... 19] [--steps 100] [--device cpu]
+        [--out outputs/bench_gnn.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from agents.cli import write_text_atomic  # noqa: E402
+from agents.models import AggregationGNN, GNNConfig  # noqa: E402
+from agents.models.gnn import centralized_logits, decentralized_logits  # noqa: E402
+from marl_cover import parallel_env  # noqa: E402
+
+#: The paper's controller time per step (ms per 50-step episode / 50; GNNs on a GTX 1080).
+PAPER_MS = {
+    ("nonlinear", 9): 176 / 50,
+    ("nonlinear", 19): 277 / 50,
+    ("linear", 9): 133 / 50,
+    ("linear", 19): 171 / 50,
+}
+GRAPH_KEYS = ("nodes", "edge_index", "edge_attr", "edge_mask")
+
+
+def record_states(env_kwargs: dict, steps: int) -> list[tuple[dict, dict]]:
+    """(stacked ego-observations, state) pairs along random-action episodes."""
+    env = parallel_env(**env_kwargs)
+    rng = np.random.default_rng(0)
+    pairs, seed = [], 0
+    env.reset(seed=seed)
+    while len(pairs) < steps:
+        if not env.agents:
+            seed += 1
+            env.reset(seed=seed)
+        pairs.append((env.observe_batch(), env.state()))
+        masks = env.state()["action_mask"]
+        actions = [int(rng.choice(np.flatnonzero(m))) for m in masks]
+        env.step(dict(zip(env.possible_agents, actions, strict=True)))
+    return pairs
+
+
+def time_policy(model: AggregationGNN, pairs: list, centralized: bool, device: str) -> float:
+    """Median milliseconds from numpy observations to actions on the host."""
+
+    def decide(observations: dict, state: dict) -> np.ndarray:
+        if centralized:
+            tensors = {k: torch.from_numpy(v).to(device) for k, v in state.items()}
+            logits = centralized_logits(model, tensors)
+        else:
+            tensors = {k: torch.from_numpy(observations[k]).to(device) for k in GRAPH_KEYS}
+            logits = decentralized_logits(model, tensors)
+        return logits.argmax(-1).cpu().numpy()
+
+    times = []
+    with torch.inference_mode():
+        for observations, state in pairs[:5]:  # warm-up
+            decide(observations, state)
+        for observations, state in pairs:
+            start = time.perf_counter()
+            decide(observations, state)
+            times.append(time.perf_counter() - start)
+    return 1000.0 * float(np.median(times))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--hops", nargs="+", type=int, default=list(range(3, 20, 2)))
+    parser.add_argument("--steps", type=int, default=100)
+    parser.add_argument("--device", default="cpu")
+    parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--out", type=Path, default=Path("outputs/bench_gnn.json"))
+    args = parser.parse_args()
+    torch.set_num_threads(args.threads)
+    rows = []
+    print(f"controller ms/step (median), {args.device}, {args.threads} thread(s)")
+    print(
+        f"{'model':<10} {'K':>3} {'robots':>6} {'map':<12} {'decentral':>10} {'central':>9} "
+        f"{'paper':>7}"
+    )
+    cases = [(hops, 4, "paper") for hops in args.hops] + [(19, 100, "paper_large")]
+    for hops, robots, map_name in cases:
+        pairs = record_states(
+            {"map": map_name, "hops": hops, "num_robots": robots},
+            args.steps if robots == 4 else max(10, args.steps // 5),
+        )
+        for kind in ("linear", "nonlinear"):
+            torch.manual_seed(0)
+            model = AggregationGNN(GNNConfig(kind=kind, hops=hops)).to(args.device).eval()
+            decentral = (
+                time_policy(model, pairs, False, args.device) if robots <= 4 else float("nan")
+            )
+            central = time_policy(model, pairs, True, args.device)
+            paper = PAPER_MS.get((kind, hops)) if robots == 4 else None
+            rows.append(
+                {
+                    "kind": kind,
+                    "hops": hops,
+                    "robots": robots,
+                    "map": map_name,
+                    "decentralized_ms": decentral,
+                    "centralized_ms": central,
+                    "paper_ms": paper,
+                }
+            )
+            print(
+                f"{kind:<10} {hops:>3} {robots:>6} {map_name:<12} {decentral:>10.2f} "
+                f"{central:>9.2f} {paper if paper else float('nan'):>7.2f}"
+            )
+    record = {
+        "device": args.device,
+        "threads": args.threads,
+        "torch": torch.__version__,
+        "machine": platform.processor() or platform.machine(),
+        "rows": rows,
+    }
+    write_text_atomic(args.out, json.dumps(record, indent=2))
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()

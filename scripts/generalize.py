@@ -1,0 +1,126 @@
+"""The paper's Fig. "generalize": 10 to 100 robots on the 5659-waypoint map, GNN beside greedy.
+
+The GNN was trained with 4 robots on ~228-waypoint windows; here it runs on the paper's large
+map (T = 50, K = the model's receptive field) in one centralized pass per step (the same actions
+as each robot on its own ego-graph, tested). Greedy runs on each robot's ego-graph. Seeds are
+paired across methods. Each (method, team size) result is written to
+``OUT/<method>_R<robots>.json`` when done and skipped when present (resumable).
+
+    python scripts/generalize.py [--robots 10 20 30 40 50 100] [--episodes 100]
+        [--checkpoint agents/models/shipped/coverage_gnn.pt] [--out outputs/generalize]
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from agents.cli import write_text_atomic  # noqa: E402
+from agents.evaluation import evaluate  # noqa: E402
+from agents.greedy import GreedyPolicy  # noqa: E402
+from marl_cover import parallel_env  # noqa: E402
+
+PAPER_CSV = (
+    Path(__file__).resolve().parent.parent.parent / "shared" / "reference" / "paper_results.csv"
+)
+TEAMS = [10, 20, 30, 40, 50, 100]
+PAPER_METHODS = {"greedy": "greedy", "gnn": "gnn_nonlinear_bc"}
+
+
+def paper_numbers(task: str = "coverage_generalize_5659") -> dict[tuple[str, int], tuple]:
+    if not PAPER_CSV.is_file():
+        return {}
+    with PAPER_CSV.open() as handle:
+        return {
+            (row["method"], int(row["x"])): (
+                float(row["mean_reward"]),
+                float(row["std_reward"]) / float(row["episodes"]) ** 0.5,
+            )
+            for row in csv.DictReader(handle)
+            if row["task"] == task
+        }
+
+
+def run(method: str, robots: int, args: argparse.Namespace, model) -> dict:  # noqa: ANN001
+    hops = model.config.hops
+    env = parallel_env(map="paper_large", num_robots=robots, hops=hops, max_steps=50)
+    if method == "gnn":
+        from agents.models.policy import GNNPolicy
+
+        policy = GNNPolicy(model, centralized=True)
+    else:
+        policy = GreedyPolicy(hops, fallback="random")
+    seeds = range(args.seed, args.seed + args.episodes)
+    summary = evaluate(env, policy, seeds)
+    return {
+        "method": method,
+        "robots": robots,
+        "hops": hops,
+        "episodes": args.episodes,
+        "seed": args.seed,
+        "checkpoint": str(args.checkpoint) if method == "gnn" else None,
+        "mean": summary.mean,
+        "std": summary.std,
+        "sem": summary.sem,
+        "rewards": [r.reward for r in summary.results],
+        "controller_ms_per_step": summary.controller_ms_per_step,
+    }
+
+
+def main() -> None:
+    import torch
+
+    from agents.models.policy import load_model
+    from agents.models.shipped import shipped_model_path
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--robots", nargs="+", type=int, default=TEAMS)
+    parser.add_argument("--episodes", type=int, default=100)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--checkpoint", type=Path, default=None)
+    parser.add_argument("--out", type=Path, default=Path("outputs/generalize"))
+    parser.add_argument("--table-only", action="store_true")
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    args.checkpoint = args.checkpoint or shipped_model_path("coverage")
+    model, _ = load_model(args.checkpoint)
+    if not args.table_only:
+        for robots in args.robots:
+            for method in ("greedy", "gnn"):
+                path = args.out / f"{method}_R{robots}.json"
+                if not path.exists():
+                    write_text_atomic(path, json.dumps(run(method, robots, args, model), indent=2))
+                    print(f"done {method} R={robots}", flush=True)
+    records = {
+        (r["method"], r["robots"]): r
+        for r in (json.loads(p.read_text()) for p in sorted(args.out.glob("*_R*.json")))
+    }
+    paper = paper_numbers()
+    print(
+        f"{'R':>4} {'greedy ours':>16} {'GNN ours':>16} {'ratio (paired)':>18} "
+        f"{'greedy paper':>16} {'GNN paper':>16}"
+    )
+    for robots in sorted({k[1] for k in records}):
+        greedy, gnn = records.get(("greedy", robots)), records.get(("gnn", robots))
+        cells = [f"{r['mean']:7.1f} +- {r['sem']:4.1f}" if r else "-" for r in (greedy, gnn)]
+        ratio = "-"
+        if greedy and gnn and len(greedy["rewards"]) == len(gnn["rewards"]):
+            import numpy as np
+
+            ratios = np.array(gnn["rewards"]) / np.maximum(np.array(greedy["rewards"]), 1)
+            ratio = f"{gnn['mean'] / greedy['mean']:5.3f} ({np.median(ratios):.3f} med)"
+        for name in ("greedy", "gnn"):
+            value = paper.get((PAPER_METHODS[name], robots))
+            cells.append(f"{value[0]:7.1f} +- {value[1]:4.1f}" if value else "-")
+        print(
+            f"{robots:>4} {cells[0]:>16} {cells[1]:>16} {ratio:>18} {cells[2]:>16} {cells[3]:>16}"
+        )
+
+
+if __name__ == "__main__":
+    main()

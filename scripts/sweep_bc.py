@@ -1,0 +1,44 @@
+"""Behaviour-cloning sweep over the receptive field: one resumable run per (kind, K).
+
+    python scripts/sweep_bc.py --kinds linear nonlinear --hops 3 5 7 9 11 13 15 17 19 \\
+        [--out outputs/bc] [any train_bc key=value override, e.g. steps=5000]
+
+Each run goes to ``OUT/<kind>_k<K>`` (the folder ``scripts/reproduce_paper.py --models OUT``
+reads); a finished run (``model.pt`` present) is skipped, an interrupted one resumes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from agents import configuration  # noqa: E402
+from agents.training.bc import BCConfig, train_bc  # noqa: E402
+
+DEFAULT_CONFIG = Path(__file__).resolve().parent.parent / "configs" / "bc_coverage.yaml"
+
+
+def main(argv: list[str]) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--kinds", nargs="+", default=["linear", "nonlinear"])
+    parser.add_argument("--hops", nargs="+", type=int, default=list(range(3, 20, 2)))
+    parser.add_argument("--config", default=str(DEFAULT_CONFIG))
+    parser.add_argument("--out", type=Path, default=Path("outputs/bc"))
+    parser.add_argument("overrides", nargs="*")
+    args = parser.parse_args(argv)
+    for kind in args.kinds:
+        for hops in args.hops:
+            out = args.out / f"{kind}_k{hops}"
+            if (out / "model.pt").exists():
+                continue
+            overrides = [*args.overrides, f"model.kind={kind}", f"model.hops={hops}", f"out={out}"]
+            config = configuration.load(BCConfig, args.config, overrides)
+            summary = train_bc(config)
+            print(f"{kind} K={hops}: {summary}", flush=True)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])

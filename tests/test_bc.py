@@ -1,0 +1,226 @@
+"""Behaviour cloning: collation, TorchRL modules, the training loop, resume, DAgger, configs."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import marl_cover
+
+torch = pytest.importorskip("torch")
+pytest.importorskip("torchrl")
+
+from agents import configuration  # noqa: E402
+from agents.datasets import record_episode, write_shard  # noqa: E402
+from agents.greedy import CentralizedGreedyPolicy  # noqa: E402
+from agents.models import AggregationGNN, GNNConfig, centralized_logits  # noqa: E402
+from agents.models.gnn import action_logits  # noqa: E402
+from agents.models.policy import (  # noqa: E402
+    EgoGraphLogits,
+    GNNPolicy,
+    load_model,
+    make_actor,
+    save_model,
+)
+from agents.training.bc import BCConfig, DaggerConfig, train_bc, validate  # noqa: E402
+from agents.training.data import GraphTable, collate_states, episode_transitions  # noqa: E402
+
+SMALL_ENV = {"map": "city", "city_size": 90, "hops": 3, "max_steps": 12}
+
+
+class GreedyRecorder:
+    """Greedy with ``act_env``, as the dataset recorder expects of an expert."""
+
+    def __init__(self, hops: int) -> None:
+        self.greedy = CentralizedGreedyPolicy(hops, fallback="random")
+
+    def reset(self, seed: int) -> None:
+        self.greedy.reset(seed)
+
+    def act_env(self, env) -> dict[str, int]:  # noqa: ANN001
+        actions = self.greedy.act_state(env.state())
+        return dict(zip(env.possible_agents, np.asarray(actions).tolist(), strict=True))
+
+
+def record(seeds: range, **env_overrides):  # noqa: ANN201
+    env = marl_cover.parallel_env(**{**SMALL_ENV, **env_overrides})
+    return [record_episode(env, GreedyRecorder(env.config.hops), seed) for seed in seeds]
+
+
+def test_collated_batches_are_the_environment_states() -> None:
+    """One flat graph of sampled transitions gives each state's centralized logits."""
+    torch.manual_seed(0)
+    model = AggregationGNN(GNNConfig(kind="nonlinear", hops=3))
+    episodes = record(range(3), num_robots=3)
+    max_nodes = max(e.graph.num_nodes for e in episodes) + 5  # padding must not matter
+    table = GraphTable([e.graph for e in episodes], max_nodes)
+    data = episode_transitions(episodes, max_nodes)
+    assert len(data) == sum(e.num_steps for e in episodes)
+    picks = torch.tensor([0, 5, 13, 30, 11])
+    batch = data[picks]
+    with torch.no_grad():
+        *graph, action_edges = collate_states(batch, table)
+        logits = action_logits(model, tuple(graph), action_edges)
+    env = marl_cover.parallel_env(**SMALL_ENV, num_robots=3)
+    offsets = np.cumsum([0] + [e.num_steps for e in episodes])
+    for row, index in enumerate(picks.tolist()):
+        episode_index = int(np.searchsorted(offsets, index, side="right") - 1)
+        episode, step = episodes[episode_index], index - offsets[episode_index]
+        env.reset(seed=episode.seed)
+        for t in range(step):  # replay to the stored state
+            env.step(dict(zip(env.possible_agents, episode.actions[t].tolist(), strict=True)))
+        assert np.array_equal(env.snapshot().robot_node, episode.robot_node[step])
+        state = {k: torch.as_tensor(v) for k, v in env.state().items()}
+        with torch.no_grad():
+            expected = centralized_logits(model, state)
+        torch.testing.assert_close(logits[3 * row : 3 * row + 3], expected, atol=1e-5, rtol=0)
+        assert torch.equal(batch["action"][row], torch.as_tensor(episode.actions[step]).long())
+
+
+def test_the_torchrl_actor_never_samples_a_masked_action() -> None:
+    from torchrl.envs.libs.pettingzoo import PettingZooWrapper
+
+    torch.manual_seed(0)
+    env = PettingZooWrapper(
+        marl_cover.parallel_env(**SMALL_ENV), return_state=False, use_mask=False, seed=0
+    )
+    actor = make_actor(
+        AggregationGNN(GNNConfig(hops=3)),
+        observation_key=("robot", "observation"),
+        action_key=("robot", "action"),
+        mask_key=("robot", "action_mask"),
+    )
+    rollout = env.rollout(12, policy=actor)
+    actions = rollout["robot", "action"]  # (T, R)
+    masks = rollout["robot", "action_mask"]  # (T, R, 5) bool
+    assert actions.shape == (12, 4)
+    assert masks.gather(-1, actions.unsqueeze(-1)).all()
+    assert torch.isfinite(rollout["robot", "sample_log_prob"]).all()
+    # the module accepts any leading batch shape: (T, R) here
+    observation = rollout["robot", "observation"]
+    logits, mask = EgoGraphLogits(AggregationGNN(GNNConfig(hops=3)))(
+        *(observation[key] for key in ("nodes", "edge_index", "edge_attr", "edge_mask")), masks
+    )
+    assert logits.shape == mask.shape == (12, 4, 5) and torch.equal(mask, masks)
+
+
+@pytest.mark.parametrize("kind", ["linear", "nonlinear"])
+def test_decentralized_and_centralized_policies_act_alike(kind: str) -> None:
+    torch.manual_seed(1)
+    model = AggregationGNN(GNNConfig(kind=kind, hops=3)).double()  # no float32 near-ties
+    local, central = GNNPolicy(model), GNNPolicy(model, centralized=True)
+    env = marl_cover.parallel_env(**SMALL_ENV, num_robots=5)
+    observations, _ = env.reset(seed=3)
+    while env.agents:
+        actions = local.act(observations)
+        assert list(central.act_state(env.state())) == [actions[a] for a in env.possible_agents]
+        observations, *_ = env.step(actions)
+
+
+def test_model_files_round_trip_and_bad_files_are_named(tmp_path) -> None:
+    model = AggregationGNN(GNNConfig(kind="linear", hops=4, hidden=8))
+    save_model(tmp_path / "m.pt", model, {"seed": 7})
+    loaded, metadata = load_model(tmp_path / "m.pt")
+    assert loaded.config == model.config and metadata == {"seed": 7}
+    for a, b in zip(loaded.state_dict().values(), model.state_dict().values(), strict=True):
+        assert torch.equal(a, b)
+    torch.save({"weights": 1}, tmp_path / "bad.pt")
+    with pytest.raises(ValueError, match="bad.pt is not a model file"):
+        load_model(tmp_path / "bad.pt")
+    with pytest.raises(FileNotFoundError, match="missing.pt"):
+        load_model(tmp_path / "missing.pt")
+
+
+def test_configs_reject_unknown_keys_and_read_sections(tmp_path) -> None:
+    config = configuration.load(BCConfig, None, ["model.kind=linear", "model.hops=7", "steps=5"])
+    assert config.model == GNNConfig(kind="linear", hops=7) and config.steps == 5
+    with pytest.raises(ValueError, match="learning_rate"):
+        configuration.load(BCConfig, None, ["learning_rate=0.1"])
+    with pytest.raises(ValueError, match=r"model.*width"):
+        configuration.load(BCConfig, None, ["model.width=3"])
+    preset = tmp_path / "preset.yaml"
+    preset.write_text("model:\n  hops: 5\n  kernel: 3\n")
+    with pytest.raises(ValueError, match=r"preset.yaml.*kernel"):
+        configuration.load(BCConfig, preset)
+
+
+def small_dataset(folder) -> None:  # noqa: ANN001
+    episodes = record(range(12))
+    write_shard(folder / "shard_00000.npz", episodes[:6])
+    write_shard(folder / "shard_00001.npz", episodes[6:])
+
+
+def small_config(tmp_path, out: str, **overrides) -> BCConfig:  # noqa: ANN001
+    values = {
+        "dataset": str(tmp_path / "data"),
+        "out": str(tmp_path / out),
+        "model": GNNConfig(kind="nonlinear", hops=3, hidden=8),
+        "env": SMALL_ENV,
+        "batch_size": 8,
+        "steps": 120,
+        "val_every": 60,
+        "val_fraction": 0.25,
+        "select_episodes": 2,
+        "holdout_seeds": [0, 2],
+        "logger": "csv",
+        "progress": False,
+        **overrides,
+    }
+    return BCConfig(**values)
+
+
+def test_behaviour_cloning_lowers_the_loss_and_resumes_exactly(tmp_path) -> None:
+    small_dataset(tmp_path / "data")
+    config = small_config(tmp_path, "whole")
+    torch.manual_seed(config.seed)
+    untrained = AggregationGNN(config.model)
+    summary = train_bc(config)
+    assert summary["train_episodes"] == 8 and summary["val_episodes"] == 2  # seeds 0, 1 held out
+    from agents.training.bc import split_episodes
+
+    _, val = split_episodes(config)
+    max_nodes = max(e.graph.num_nodes for e in val)
+    table = GraphTable([e.graph for e in val], max_nodes)
+    before = validate(untrained, episode_transitions(val, max_nodes), table)["val_cross_entropy"]
+    assert summary["val_cross_entropy"] < before - 0.1
+    assert (tmp_path / "whole" / "log" / "scalars" / "val_cross_entropy.csv").exists()
+    for name in ("best.pt", "model.pt", "checkpoint.pt", "config.yaml", "summary.json"):
+        assert (tmp_path / "whole" / name).exists()
+
+    # interrupted at step 60, then resumed to 120: the same weights as one run
+    train_bc(small_config(tmp_path, "parts", steps=60))
+    resumed = train_bc(small_config(tmp_path, "parts"))
+    assert resumed["step"] == 120
+    whole, _ = load_model(tmp_path / "whole" / "model.pt")
+    parts, _ = load_model(tmp_path / "parts" / "model.pt")
+    for a, b in zip(whole.state_dict().values(), parts.state_dict().values(), strict=True):
+        assert torch.equal(a, b)
+    with pytest.raises(ValueError, match="other settings"):
+        train_bc(small_config(tmp_path, "parts", batch_size=4))
+
+
+def test_dagger_labels_the_states_the_learner_visits(tmp_path) -> None:
+    pytest.importorskip("pyvrp")
+    from agents.datasets import read_shard
+
+    small_dataset(tmp_path / "data")
+    dagger = DaggerConfig(rounds=1, episodes=2, beta=0.0, steps=20, iterations=30, seed=500)
+    summary = train_bc(small_config(tmp_path, "dagger", steps=40, val_every=30, dagger=dagger))
+    assert summary["step"] == 60
+    episodes = read_shard(tmp_path / "dagger" / "dagger" / "shard_00000.npz")
+    assert [e.seed for e in episodes] == [500, 501]
+    from agents.experts import RoutingExpert
+
+    env = marl_cover.parallel_env(**SMALL_ENV)
+    for episode in episodes:
+        assert episode.actions.shape == (SMALL_ENV["max_steps"], 4)
+        env.reset(seed=episode.seed)
+        assert np.array_equal(env.snapshot().robot_node, episode.robot_node[0])
+        expert = RoutingExpert(max_iterations=30, seed=episode.seed)
+        assert np.array_equal(expert.act_snapshot(env.snapshot()), episode.actions[0])
+        masks = np.concatenate(
+            [episode.robot_node[:-1, :, None], episode.graph.neighbors[episode.robot_node[:-1]]],
+            axis=-1,
+        )
+        labels = np.take_along_axis(masks, episode.actions[..., None].astype(int), -1)
+        assert (labels >= 0).all()  # every label is a legal move
