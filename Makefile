@@ -1,4 +1,4 @@
-# make demo: set up .venv and run greedy robots on a procedural city.
+# make demo: set up .venv; the shipped GNN beside greedy and the expert on procedural cities (+ GIF).
 # make test: set up .venv and run the test suite.
 PYTHON ?= python3
 VENV := .venv

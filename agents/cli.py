@@ -9,7 +9,11 @@ from typing import Any
 
 
 def parse_value(text: str) -> Any:
-    """``true``/``false``, ``none``/``null``, integers and floats; anything else stays text."""
+    """``true``/``false``, ``none``/``null``, integers, floats and ``[a,b,...]`` lists of them;
+    anything else stays text."""
+    if text.startswith("[") and text.endswith("]"):
+        inner = text[1:-1].strip()
+        return [parse_value(item.strip()) for item in inner.split(",")] if inner else []
     lowered = text.lower()
     if lowered in ("true", "false"):
         return lowered == "true"

@@ -57,15 +57,21 @@ def record_states(env_kwargs: dict, steps: int) -> list[tuple[dict, dict]]:
     return pairs
 
 
-def time_policy(model: AggregationGNN, pairs: list, centralized: bool, device: str) -> float:
-    """Median milliseconds from numpy observations to actions on the host."""
+def time_policy(model: AggregationGNN, pairs: list, mode: str, device: str) -> float:
+    """Median milliseconds from numpy observations to actions on the host.
+
+    ``mode``: ``"central"`` (one pass over the state), ``"decentral"`` (every robot's
+    ego-graph in one batch) or ``"one_robot"`` (robot 0's ego-graph alone: what each robot
+    computes on its own computer).
+    """
 
     def decide(observations: dict, state: dict) -> np.ndarray:
-        if centralized:
+        if mode == "central":
             tensors = {k: torch.from_numpy(v).to(device) for k, v in state.items()}
             logits = centralized_logits(model, tensors)
         else:
-            tensors = {k: torch.from_numpy(observations[k]).to(device) for k in GRAPH_KEYS}
+            robots = slice(0, 1) if mode == "one_robot" else slice(None)
+            tensors = {k: torch.from_numpy(observations[k][robots]).to(device) for k in GRAPH_KEYS}
             logits = decentralized_logits(model, tensors)
         return logits.argmax(-1).cpu().numpy()
 
@@ -92,8 +98,8 @@ def main() -> None:
     rows = []
     print(f"controller ms/step (median), {args.device}, {args.threads} thread(s)")
     print(
-        f"{'model':<10} {'K':>3} {'robots':>6} {'map':<12} {'decentral':>10} {'central':>9} "
-        f"{'paper':>7}"
+        f"{'model':<10} {'K':>3} {'robots':>6} {'map':<12} {'one robot':>10} {'decentral':>10} "
+        f"{'central':>9} {'paper':>7}"
     )
     cases = [(hops, 4, "paper") for hops in args.hops] + [(19, 100, "paper_large")]
     for hops, robots, map_name in cases:
@@ -104,10 +110,12 @@ def main() -> None:
         for kind in ("linear", "nonlinear"):
             torch.manual_seed(0)
             model = AggregationGNN(GNNConfig(kind=kind, hops=hops)).to(args.device).eval()
+            small = robots <= 4
+            one = time_policy(model, pairs, "one_robot", args.device) if small else float("nan")
             decentral = (
-                time_policy(model, pairs, False, args.device) if robots <= 4 else float("nan")
+                time_policy(model, pairs, "decentral", args.device) if small else float("nan")
             )
-            central = time_policy(model, pairs, True, args.device)
+            central = time_policy(model, pairs, "central", args.device)
             paper = PAPER_MS.get((kind, hops)) if robots == 4 else None
             rows.append(
                 {
@@ -115,13 +123,14 @@ def main() -> None:
                     "hops": hops,
                     "robots": robots,
                     "map": map_name,
+                    "one_robot_ms": one,
                     "decentralized_ms": decentral,
                     "centralized_ms": central,
                     "paper_ms": paper,
                 }
             )
             print(
-                f"{kind:<10} {hops:>3} {robots:>6} {map_name:<12} {decentral:>10.2f} "
+                f"{kind:<10} {hops:>3} {robots:>6} {map_name:<12} {one:>10.2f} {decentral:>10.2f} "
                 f"{central:>9.2f} {paper if paper else float('nan'):>7.2f}"
             )
     record = {

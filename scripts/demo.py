@@ -1,6 +1,11 @@
-"""Demo: greedy robots on fresh procedural cities; prints a table and writes a picture.
+"""Demo: the shipped GNN beside greedy and the routing expert on fresh procedural cities.
 
-python scripts/demo.py [--episodes 10] [--robots 4] [--hops 19] [--out outputs/demo]
+Prints a comparison table (paired episodes) and writes an animation of one GNN episode.
+
+    python scripts/demo.py [--episodes 10] [--robots 4] [--city-size 228] [--out outputs/demo]
+
+The GNN was trained on windows of the paper's map; procedural cities are maps it never saw.
+Without the ``train`` extra (torch) or the ``expert`` extra (PyVRP) those rows are skipped.
 """
 
 from __future__ import annotations
@@ -8,61 +13,100 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from agents.evaluation import evaluate  # noqa: E402
-from agents.greedy import CentralizedGreedyPolicy, GreedyPolicy  # noqa: E402
+from agents.greedy import GreedyPolicy  # noqa: E402
 from marl_cover import parallel_env  # noqa: E402
+
+
+def load_gnn() -> Any:
+    """The shipped coverage model, or ``None`` without torch."""
+    try:
+        import torch
+    except ImportError:
+        print("torch is not installed (the train extra): no GNN row")
+        return None
+    from agents.models.policy import load_model
+    from agents.models.shipped import shipped_model_path
+
+    torch.set_num_threads(1)
+    model, _ = load_model(shipped_model_path("coverage"))
+    return model
+
+
+def make_policies(model: Any, hops: int, expert_time: float) -> dict[str, Any]:
+    policies: dict[str, Any] = {}
+    if model is not None:
+        from agents.models.policy import GNNPolicy
+
+        policies[f"GNN {model.config.kind}, K={model.config.hops} (shipped)"] = GNNPolicy(model)
+    policies[f"greedy, K={hops}"] = GreedyPolicy(hops, fallback="random")
+    try:
+        from agents.experts import RoutingExpert
+
+        policies[f"expert (PyVRP open loop, {expert_time} s)"] = RoutingExpert(
+            time_limit=expert_time
+        )
+    except ImportError:
+        print("PyVRP is not installed (the expert extra): no expert row")
+    return policies
+
+
+def animate(env_kwargs: dict[str, Any], policy: Any, seed: int, path: Path) -> None:
+    """Plays one episode and writes its frames as a GIF."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from PIL import Image
+
+    env = parallel_env(**env_kwargs, render_mode="rgb_array")
+    observations, _ = env.reset(seed=seed)
+    frames = [env.render()]
+    while env.agents:
+        observations, *_ = env.step(policy.act(observations))
+        frames.append(env.render())
+    env.close()
+    images = [Image.fromarray(frame).convert("P", palette=Image.ADAPTIVE) for frame in frames]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    images[0].save(
+        path, save_all=True, append_images=images[1:] + [images[-1]] * 10, duration=150, loop=0
+    )
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--episodes", type=int, default=10)
     parser.add_argument("--robots", type=int, default=4)
-    parser.add_argument("--hops", type=int, default=19)
     parser.add_argument("--city-size", type=int, default=228)
+    parser.add_argument("--expert-time", type=float, default=0.3, help="seconds per plan")
+    parser.add_argument("--seed", type=int, default=1000, help="first city seed")
     parser.add_argument("--out", type=Path, default=Path("outputs/demo"))
     args = parser.parse_args()
-    env = parallel_env(num_robots=args.robots, hops=args.hops, city_size=args.city_size)
-    seeds = range(args.episodes)
-    policies = {
-        "greedy (each robot on its ego-graph)": GreedyPolicy(args.hops, fallback="random"),
-        "greedy (centralized, on state())": CentralizedGreedyPolicy(args.hops, fallback="random"),
-    }
+    model = load_gnn()
+    hops = model.config.hops if model is not None else 19
+    env_kwargs = {"num_robots": args.robots, "hops": hops, "city_size": args.city_size}
+    env = parallel_env(**env_kwargs)
+    seeds = range(args.seed, args.seed + args.episodes)
     print(
-        f"{args.robots} robots, K = {args.hops}, T = {env.config.max_steps}, "
-        f"{args.episodes} procedural cities of {args.city_size} waypoints "
-        f"(seeds 0..{args.episodes - 1})"
+        f"{args.robots} robots, K = {hops}, T = {env.config.max_steps}, {args.episodes} fresh "
+        f"procedural cities of {args.city_size} waypoints (seeds {seeds.start}..{seeds.stop - 1})"
     )
-    print(
-        f"{'policy':<38} {'reward':>15} {'coverage':>9} {'policy ms/step':>15} {'env ms/step':>12}"
-    )
-    for name, policy in policies.items():
+    print(f"{'policy':<40} {'reward':>15} {'coverage':>9} {'policy ms/step':>15}")
+    for name, policy in make_policies(model, hops, args.expert_time).items():
         s = evaluate(env, policy, seeds)
         print(
-            f"{name:<38} {s.mean:7.1f} +- {s.sem:4.1f} {100 * s.mean_coverage:8.1f}% "
-            f"{s.controller_ms_per_step:15.2f} {s.env_ms_per_step:12.2f}"
+            f"{name:<40} {s.mean:7.1f} +- {s.sem:4.1f} {100 * s.mean_coverage:8.1f}% "
+            f"{s.controller_ms_per_step:15.2f}"
         )
+    if model is not None:
+        from agents.models.policy import GNNPolicy
 
-    # one episode drawn: the map, points of interest (orange; green once covered), trails
-    import matplotlib
-
-    matplotlib.use("Agg")
-    from PIL import Image
-
-    env = parallel_env(
-        num_robots=args.robots, hops=args.hops, city_size=args.city_size, render_mode="rgb_array"
-    )
-    policy = GreedyPolicy(args.hops, fallback="random", seed=0)
-    obs, _ = env.reset(seed=0)
-    while env.agents:
-        obs, *_ = env.step(policy.act(obs))
-    args.out.mkdir(parents=True, exist_ok=True)
-    path = args.out / "greedy_city.png"
-    Image.fromarray(env.render()).save(path)
-    env.close()
-    print(f"wrote {path}")
+        path = args.out / "gnn_city.gif"
+        animate(env_kwargs, GNNPolicy(model), seeds.start, path)
+        print(f"wrote {path}")
 
 
 if __name__ == "__main__":

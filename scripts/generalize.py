@@ -84,6 +84,9 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--checkpoint", type=Path, default=None)
     parser.add_argument("--out", type=Path, default=Path("outputs/generalize"))
+    parser.add_argument(
+        "--methods", nargs="+", default=["greedy", "gnn"], choices=["greedy", "gnn"]
+    )
     parser.add_argument("--table-only", action="store_true")
     args = parser.parse_args()
     torch.set_num_threads(1)
@@ -91,7 +94,7 @@ def main() -> None:
     model, _ = load_model(args.checkpoint)
     if not args.table_only:
         for robots in args.robots:
-            for method in ("greedy", "gnn"):
+            for method in args.methods:
                 path = args.out / f"{method}_R{robots}.json"
                 if not path.exists():
                     write_text_atomic(path, json.dumps(run(method, robots, args, model), indent=2))
@@ -120,6 +123,37 @@ def main() -> None:
         print(
             f"{robots:>4} {cells[0]:>16} {cells[1]:>16} {ratio:>18} {cells[2]:>16} {cells[3]:>16}"
         )
+    if records:
+        plot(records, paper, args.out / "generalize.png")
+        print(f"wrote {args.out / 'generalize.png'}")
+
+
+def plot(records: dict, paper: dict, path: Path) -> None:
+    """Mean +- SEM against team size, ours (solid) and the paper's (dashed)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.5, 4.2), dpi=120)
+    for colour, method in zip("br", ("greedy", "gnn"), strict=True):
+        ours = sorted((k[1], r["mean"], r["sem"]) for k, r in records.items() if k[0] == method)
+        if ours:
+            x, y, e = zip(*ours, strict=True)
+            ax.errorbar(x, y, yerr=e, fmt="o-", color=colour, capsize=3, label=f"{method}, ours")
+        ref = sorted((k[1], *v) for k, v in paper.items() if k[0] == PAPER_METHODS[method])
+        if ref:
+            x, y, e = zip(*ref, strict=True)
+            label = f"{PAPER_METHODS[method]}, paper"
+            ax.errorbar(x, y, yerr=e, fmt="^--", color=colour, alpha=0.5, capsize=3, label=label)
+    ax.set_xlabel("robots")
+    ax.set_ylabel("points of interest visited in 50 steps (mean +- SEM)")
+    ax.set_title("Coverage on the 5659-waypoint map, K = 19")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
 
 
 if __name__ == "__main__":

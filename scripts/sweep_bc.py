@@ -1,7 +1,9 @@
 """Behaviour-cloning sweep over the receptive field: one resumable run per (kind, K).
 
-    python scripts/sweep_bc.py --kinds linear nonlinear --hops 3 5 7 9 11 13 15 17 19 \\
-        [--out outputs/bc] [any train_bc key=value override, e.g. steps=5000]
+    python scripts/sweep_bc.py [key=value overrides of train_bc, e.g. steps=3000] \\
+        --kinds linear nonlinear --hops 3 5 7 9 11 13 15 17 19 [--out outputs/bc]
+
+(overrides go before ``--kinds``/``--hops``, whose value lists would swallow them).
 
 Each run goes to ``OUT/<kind>_k<K>`` (the folder ``scripts/reproduce_paper.py --models OUT``
 reads); a finished run (``model.pt`` present) is skipped, an interrupted one resumes.

@@ -32,6 +32,9 @@ def main(argv: list[str]) -> None:
     parser.add_argument("overrides", nargs="*", help="key=value overrides")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.WARNING)
+    import torchrl  # noqa: F401 (configures its logger on import; quieten it after)
+
+    logging.getLogger("torchrl").setLevel(logging.WARNING)  # it logs buffer set-up to stdout
     try:
         config = configuration.load(BCConfig, args.config, args.overrides)
     except (ValueError, FileNotFoundError) as error:

@@ -224,3 +224,36 @@ def test_dagger_labels_the_states_the_learner_visits(tmp_path) -> None:
         )
         labels = np.take_along_axis(masks, episode.actions[..., None].astype(int), -1)
         assert (labels >= 0).all()  # every label is a legal move
+
+
+def test_train_bc_script_runs_from_the_preset_with_overrides(tmp_path) -> None:
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parent.parent
+    small_dataset(tmp_path / "data")
+    command = [
+        sys.executable,
+        str(root / "scripts" / "train_bc.py"),
+        f"dataset={tmp_path / 'data'}",
+        f"out={tmp_path / 'run'}",
+        "model.hops=2",
+        "steps=20",
+        "val_every=10",
+        "select_episodes=1",
+        "holdout_seeds=[0,1]",
+        "env.map=city",
+        "env.city_size=90",
+        "progress=false",
+    ]
+    result = subprocess.run(command, capture_output=True, text=True, cwd=root, timeout=300)
+    assert result.returncode == 0, result.stderr
+    assert json.loads(result.stdout)["step"] == 20
+    config = (tmp_path / "run" / "config.yaml").read_text()
+    assert "kind: nonlinear" in config and "hops: 2" in config  # preset + override
+    bad = subprocess.run(
+        [*command[:2], "model.depth=3"], capture_output=True, text=True, cwd=root, timeout=300
+    )
+    assert bad.returncode != 0 and "depth" in bad.stderr

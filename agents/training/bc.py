@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -122,7 +122,10 @@ def split_episodes(config: BCConfig) -> tuple[list[Episode], list[Episode]]:
     if config.max_episodes is not None:
         episodes = episodes[: config.max_episodes]
     if len(episodes) < 2:
-        raise ValueError(f"{config.dataset}: {len(episodes)} usable episodes, need >= 2")
+        raise ValueError(
+            f"{config.dataset}: {len(episodes)} usable episodes, need >= 2 (episodes with "
+            f"seeds in holdout_seeds [{first}, {stop}) are held out for evaluation)"
+        )
     order = np.random.default_rng(config.seed).permutation(len(episodes))
     num_val = max(1, round(config.val_fraction * len(episodes)))
     val = [episodes[i] for i in sorted(order[:num_val])]
@@ -391,6 +394,9 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
             _save_checkpoint(
                 checkpoint_path,
                 {
+                    "gnn_config": asdict(model.config),  # load_model() reads these two
+                    "state_dict": model.state_dict(),
+                    "metadata": {**metadata, "step": step},
                     "model": model.state_dict(),
                     "optimizer": optimizer.state_dict(),
                     "sampler": buffer.sampler.state_dict(),
