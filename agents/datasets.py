@@ -13,13 +13,13 @@ skipping the shards already on disk: no episode is lost or written twice.
 
 from __future__ import annotations
 
-import os
-import tempfile
+import io
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from agents.cli import write_bytes_atomic
 from marl_cover.ego import PaddedShape, build_ego_graphs, waypoint_features
 from marl_cover.env import CoverageEnv
 from marl_cover.graph import SpatialGraph
@@ -139,19 +139,9 @@ def _unpack(arrays: dict[str, np.ndarray]) -> list[Episode]:
 
 def write_shard(path: Path, episodes: list[Episode]) -> None:
     """Writes episodes to ``path`` atomically (a temporary file in the same folder, renamed)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.NamedTemporaryFile(
-        dir=path.parent, prefix=".tmp_", suffix=".npz", delete=False
-    ) as handle:
-        temporary = Path(handle.name)
-        try:
-            np.savez_compressed(handle, **_pack(episodes))
-        except BaseException:
-            handle.close()
-            temporary.unlink(missing_ok=True)
-            raise
-    temporary.chmod(0o644)
-    os.replace(temporary, path)
+    buffer = io.BytesIO()
+    np.savez_compressed(buffer, **_pack(episodes))
+    write_bytes_atomic(path, buffer.getvalue())
 
 
 def read_shard(path: Path) -> list[Episode]:

@@ -72,28 +72,23 @@ def parse_overrides(
         SystemExit: a malformed argument or an unknown key, naming it.
     """
     options, expert, gnn, env = EvaluateOptions(), ExpertOptions(), GNNOptions(), {}
+    sections = {"expert": expert, "gnn": gnn}
     env_keys = {f.name for f in fields(CoverageConfig)} - {"graph", "render_mode"}
     for arg in argv:
         if "=" not in arg:
             raise SystemExit(f"arguments are key=value overrides, got {arg!r}")
         key, text = arg.split("=", 1)
         value = parse_value(text)
-        if key.startswith("expert."):
-            name = key.removeprefix("expert.")
-            if name not in {f.name for f in fields(ExpertOptions)}:
+        section, _, name = key.partition(".")
+        if name and section in sections:
+            options_of_section = sections[section]
+            names = {f.name for f in fields(options_of_section)}
+            if name not in names:
                 raise SystemExit(
-                    f"unknown key {key!r}; expert keys: "
-                    f"{sorted('expert.' + f.name for f in fields(ExpertOptions))}"
+                    f"unknown key {key!r}; {section} keys: "
+                    f"{sorted(f'{section}.{n}' for n in names)}"
                 )
-            setattr(expert, name, value)
-        elif key.startswith("gnn."):
-            name = key.removeprefix("gnn.")
-            if name not in {f.name for f in fields(GNNOptions)}:
-                raise SystemExit(
-                    f"unknown key {key!r}; gnn keys: "
-                    f"{sorted('gnn.' + f.name for f in fields(GNNOptions))}"
-                )
-            setattr(gnn, name, value)
+            setattr(options_of_section, name, value)
         elif key in {f.name for f in fields(EvaluateOptions)}:
             setattr(options, key, value if key not in ("out", "checkpoint") else text)
         elif key in env_keys:

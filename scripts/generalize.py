@@ -13,7 +13,6 @@ paired across methods. Each (method, team size) result is written to
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import sys
 from pathlib import Path
@@ -23,27 +22,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from agents.cli import write_text_atomic  # noqa: E402
 from agents.evaluation import evaluate  # noqa: E402
 from agents.greedy import GreedyPolicy  # noqa: E402
+from agents.paper import paper_numbers  # noqa: E402
 from marl_cover import parallel_env  # noqa: E402
 
-PAPER_CSV = (
-    Path(__file__).resolve().parent.parent.parent / "shared" / "reference" / "paper_results.csv"
-)
 TEAMS = [10, 20, 30, 40, 50, 100]
 PAPER_METHODS = {"greedy": "greedy", "gnn": "gnn_nonlinear_bc"}
-
-
-def paper_numbers(task: str = "coverage_generalize_5659") -> dict[tuple[str, int], tuple]:
-    if not PAPER_CSV.is_file():
-        return {}
-    with PAPER_CSV.open() as handle:
-        return {
-            (row["method"], int(row["x"])): (
-                float(row["mean_reward"]),
-                float(row["std_reward"]) / float(row["episodes"]) ** 0.5,
-            )
-            for row in csv.DictReader(handle)
-            if row["task"] == task
-        }
 
 
 def run(method: str, robots: int, args: argparse.Namespace, model) -> dict:  # noqa: ANN001
@@ -103,7 +86,7 @@ def main() -> None:
         (r["method"], r["robots"]): r
         for r in (json.loads(p.read_text()) for p in sorted(args.out.glob("*_R*.json")))
     }
-    paper = paper_numbers()
+    paper = paper_numbers("coverage_generalize_5659")
     print(
         f"{'R':>4} {'greedy ours':>16} {'GNN ours':>16} {'ratio (paired)':>18} "
         f"{'greedy paper':>16} {'GNN paper':>16}"

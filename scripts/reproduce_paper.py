@@ -19,7 +19,6 @@ is there.
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import sys
 from pathlib import Path
@@ -29,12 +28,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from agents.cli import write_text_atomic  # noqa: E402
 from agents.evaluation import evaluate  # noqa: E402
 from agents.greedy import GreedyPolicy  # noqa: E402
+from agents.paper import paper_numbers  # noqa: E402
 from marl_cover import parallel_env  # noqa: E402
 
 HOPS = list(range(3, 20, 2))
-PAPER_CSV = (
-    Path(__file__).resolve().parent.parent.parent / "shared" / "reference" / "paper_results.csv"
-)
 #: Our method names -> the paper's, and the episode lengths each is run with.
 METHODS = {
     "greedy": ("greedy", (50, 49)),
@@ -42,21 +39,6 @@ METHODS = {
     "gnn_linear": ("gnn_linear_bc", (50,)),
     "gnn_nonlinear": ("gnn_nonlinear_bc", (50,)),
 }
-
-
-def paper_numbers(path: Path, task: str = "coverage") -> dict[tuple[str, int], tuple[float, float]]:
-    """``{(paper method, K): (mean, sem)}`` from the paper's CSV (SEM = std / sqrt(n))."""
-    if not path.is_file():
-        return {}
-    with path.open() as handle:
-        return {
-            (row["method"], int(row["x"])): (
-                float(row["mean_reward"]),
-                float(row["std_reward"]) / float(row["episodes"]) ** 0.5,
-            )
-            for row in csv.DictReader(handle)
-            if row["task"] == task and row["x_name"] == "receptive_field_K"
-        }
 
 
 def model_path(method: str, hops: int, args: argparse.Namespace) -> Path:
@@ -135,7 +117,7 @@ def main() -> None:
 
 
 def print_table(records: list[dict]) -> None:
-    paper = paper_numbers(PAPER_CSV)
+    paper = paper_numbers("coverage")
     by_key = {(r["method"], r["hops"]): r for r in records}
     header = f"{'K':>3}"
     columns = []
@@ -162,7 +144,7 @@ def plot(records: list[dict], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    paper = paper_numbers(PAPER_CSV)
+    paper = paper_numbers("coverage")
     fig, ax = plt.subplots(figsize=(7, 4.5), dpi=120)
     for colour, (method, (paper_name, lengths)) in zip("brgm", METHODS.items(), strict=False):
         points = sorted(

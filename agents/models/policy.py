@@ -168,17 +168,17 @@ class GNNPolicy:
         return self._choose(centralized_logits(self.model, tensors))
 
 
-def save_model(path: str | Path, model: AggregationGNN, metadata: dict[str, Any]) -> None:
-    """Writes ``model`` with its config and ``metadata`` to ``path`` atomically."""
+def save_model(
+    path: str | Path, model: AggregationGNN, metadata: dict[str, Any], **extra: Any
+) -> None:
+    """Writes ``model`` with its config and ``metadata`` to ``path`` atomically.
+
+    ``extra`` entries (a training checkpoint's optimiser, sampler, ...) are stored beside them;
+    :func:`load_model` ignores them.
+    """
     buffer = io.BytesIO()
-    torch.save(
-        {
-            "gnn_config": asdict(model.config),
-            "state_dict": model.state_dict(),
-            "metadata": metadata,
-        },
-        buffer,
-    )
+    record = {"gnn_config": asdict(model.config), "state_dict": model.state_dict()}
+    torch.save({**record, "metadata": metadata, **extra}, buffer)
     write_bytes_atomic(path, buffer.getvalue())
 
 

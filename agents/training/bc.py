@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -243,16 +243,6 @@ def _make_logger(config: BCConfig, out: Path) -> Any:
     return CSVLogger(exp_name="log", log_dir=str(out))
 
 
-def _save_checkpoint(path: Path, state: dict[str, Any]) -> None:
-    import io
-
-    from agents.cli import write_bytes_atomic
-
-    buffer = io.BytesIO()
-    torch.save(state, buffer)
-    write_bytes_atomic(path, buffer.getvalue())
-
-
 def _phase(step: int, config: BCConfig) -> tuple[int, int]:
     """(phase, step within the phase): phase 0 is BC, phase k the training after round k."""
     if step < config.steps or config.dagger.rounds == 0:
@@ -298,11 +288,8 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
     train, val = split_episodes(config)
     env = CoverageEnv(**config.env)
     max_nodes = max([e.graph.num_nodes for e in train + val] + [env.max_waypoints])
-    dagger_episodes = [
-        read_shard(out / "dagger" / SHARD_PATTERN.format(k))
-        for k in range(config.dagger.rounds)
-        if (out / "dagger" / SHARD_PATTERN.format(k)).exists()
-    ]
+    dagger_shards = [out / "dagger" / SHARD_PATTERN.format(k) for k in range(config.dagger.rounds)]
+    dagger_episodes = [read_shard(path) for path in dagger_shards if path.exists()]
     table = GraphTable([e.graph for e in train + val], max_nodes)
     val_data = episode_transitions(val, max_nodes, first_index=len(train))
     capacity = sum(e.num_steps for e in train) + config.dagger.rounds * config.dagger.episodes * (
@@ -331,7 +318,7 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
     checkpoint_path = out / "checkpoint.pt"
     if checkpoint_path.exists():
         state = torch.load(checkpoint_path, weights_only=False)
-        model.load_state_dict(state["model"])
+        model.load_state_dict(state["state_dict"])
         optimizer.load_state_dict(state["optimizer"])
         buffer.sampler.load_state_dict(state["sampler"])
         torch.set_rng_state(state["torch_rng"])
@@ -391,20 +378,16 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
                 progress.write(
                     f"step {step}: " + ", ".join(f"{k} {v:.4f}" for k, v in scores.items())
                 )
-            _save_checkpoint(
+            save_model(  # a model file (load_model reads it) plus the training state
                 checkpoint_path,
-                {
-                    "gnn_config": asdict(model.config),  # load_model() reads these two
-                    "state_dict": model.state_dict(),
-                    "metadata": {**metadata, "step": step},
-                    "model": model.state_dict(),
-                    "optimizer": optimizer.state_dict(),
-                    "sampler": buffer.sampler.state_dict(),
-                    "torch_rng": torch.get_rng_state(),
-                    "step": step,
-                    "best_reward": best_reward,
-                    "config": record,
-                },
+                model,
+                {**metadata, "step": step},
+                optimizer=optimizer.state_dict(),
+                sampler=buffer.sampler.state_dict(),
+                torch_rng=torch.get_rng_state(),
+                step=step,
+                best_reward=best_reward,
+                config=record,
             )
     if progress is not None:
         progress.close()
