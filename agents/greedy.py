@@ -61,6 +61,11 @@ class _GreedyBase:
         self.seed = seed
         self._rng = np.random.default_rng(seed)
 
+    @property
+    def deterministic(self) -> bool:
+        """Whether the same observations always give the same actions."""
+        return self.fallback == "stay"
+
     def reset(self, seed: int | None = None) -> None:
         """Re-seeds the generator used by ``fallback="random"``."""
         self._rng = np.random.default_rng(self.seed if seed is None else seed)

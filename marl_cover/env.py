@@ -350,12 +350,26 @@ class CoverageEnv(ParallelEnv):
 
     def _visit(self, next_node: np.ndarray) -> np.ndarray:
         """Moves the robots; returns the points of interest each visited first, ``(R,)``."""
-        new_interest = (self._interest[next_node] & ~self._visited[next_node]).astype(np.int64)
-        self._visited[next_node] = True
-        self._waypoint_features[next_node, 2] = 0.0
+        new_interest = self._mark_visited(next_node)
         self._robot_node = next_node
-        self._credits += new_interest
         self._trails.append(next_node.copy())
+        return new_interest
+
+    def _mark_visited(self, node: np.ndarray) -> np.ndarray:
+        """Marks ``node`` ``(R,)`` visited (``-1``: robot at no waypoint); returns each robot's
+        newly visited points of interest ``(R,)``, credited to the lowest-index robot when two
+        reach one at once."""
+        robots = np.flatnonzero(node >= 0)
+        nodes = node[robots]
+        fresh = self._interest[nodes] & ~self._visited[nodes]
+        if len(nodes) > 1:  # several robots at one waypoint: only the first gets the credit
+            _, first = np.unique(nodes, return_index=True)
+            fresh &= np.isin(np.arange(len(nodes)), first)
+        new_interest = np.zeros(len(node), dtype=np.int64)
+        new_interest[robots] = fresh
+        self._visited[nodes] = True
+        self._waypoint_features[nodes, 2] = 0.0
+        self._credits += new_interest
         return new_interest
 
     def _infos(

@@ -28,6 +28,8 @@ def draw_map(
     interest: np.ndarray,
     visited: np.ndarray,
     trails: np.ndarray | None = None,
+    robot_xy: np.ndarray | None = None,
+    trail_xy: np.ndarray | None = None,
 ) -> None:
     """Draws waypoints, points of interest (orange, green once covered), trails and robots.
 
@@ -38,6 +40,9 @@ def draw_map(
         interest: ``(N,)`` bool, points of interest.
         visited: ``(N,)`` bool, visited waypoints.
         trails: ``(T + 1, R)`` waypoints of each robot over time, or ``None``.
+        robot_xy: ``(R, 2)`` robot positions in metres (robots off the waypoints); overrides
+            ``robot_node``.
+        trail_xy: ``(T, R, 2)`` past positions in metres; overrides ``trails``.
     """
     import matplotlib.pyplot as plt
 
@@ -53,10 +58,13 @@ def draw_map(
     ax.scatter(*pos[interest & ~visited].T, s=size, c=INTEREST_COLOUR, zorder=2)
     ax.scatter(*pos[interest & visited].T, s=size, c=COVERED_COLOUR, alpha=0.5, zorder=2)
     colours = plt.get_cmap("tab10")(np.arange(len(robot_node)) % 10)
-    if trails is not None and len(trails) > 1:
+    if trail_xy is None and trails is not None:
+        trail_xy = pos[trails]  # (T + 1, R, 2)
+    if trail_xy is not None and len(trail_xy) > 1:
         for r in range(len(robot_node)):
-            ax.plot(*pos[trails[:, r]].T, color=colours[r], linewidth=1.5, alpha=0.8, zorder=3)
-    ax.scatter(*pos[robot_node].T, s=size * 4, c=colours, edgecolors="black", zorder=4)
+            ax.plot(*trail_xy[:, r].T, color=colours[r], linewidth=1.5, alpha=0.8, zorder=3)
+    robot_xy = pos[robot_node] if robot_xy is None else robot_xy
+    ax.scatter(*robot_xy.T, s=size * 4, c=colours, edgecolors="black", zorder=4)
     ax.set_aspect("equal")
     ax.autoscale_view()
     ax.set_xticks([])

@@ -175,8 +175,17 @@ class RoutingExpert:
         )
 
     # ------------------------------------------------------------------ acting
-    def act_snapshot(self, snapshot: CoverageSnapshot) -> np.ndarray:
-        """Actions ``(R,)`` for the current snapshot."""
+    def act_snapshot(
+        self, snapshot: CoverageSnapshot, active: np.ndarray | None = None
+    ) -> np.ndarray:
+        """Actions ``(R,)`` for the current snapshot.
+
+        Args:
+            snapshot: The state to act on.
+            active: ``(R,)`` bool, the robots whose actions will be carried out (robots that
+                decide asynchronously, as in :mod:`marl_cover.continuous`); the others are
+                expected to stay where the snapshot puts them. ``None``: every robot.
+        """
         replanned = False
         if self._routes is not None:  # drop stops visited since (by anyone)
             self._routes = [[s for s in route if not snapshot.visited[s]] for route in self._routes]
@@ -197,6 +206,8 @@ class RoutingExpert:
             snapshot.graph.neighbors[snapshot.robot_node, (actions - 1).clip(min=0)],
             snapshot.robot_node,
         )
+        if active is not None:  # the others keep their waypoints
+            targets = np.where(active, targets, snapshot.robot_node)
         self._expected = targets
         return actions
 

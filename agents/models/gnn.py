@@ -243,11 +243,18 @@ class AggregationGNN(nn.Module):
 def flatten_padded(batch: dict[str, torch.Tensor]) -> tuple[torch.Tensor, ...]:
     """A batch of padded graphs ``(B, M, ...)`` as one flat graph without padded edges.
 
+    With a ``node_mask`` (real nodes are a prefix of each graph), node padding beyond the
+    largest graph of the batch is cut off too: real edges never touch it, so the outputs are
+    unchanged and a large padded shape costs nothing.
+
     Returns:
-        ``nodes (B*M, F)``, ``edge_index (2, E')``, ``edge_attr (E', 1)``, and the flat edge
-        id of each graph's first five edges, ``(B, 5)`` (``-1`` where padded).
+        ``nodes (B*M', F)`` with ``M' <= M``, ``edge_index (2, E')``, ``edge_attr (E', 1)``,
+        and the flat edge id of each graph's first five edges, ``(B, 5)`` (``-1`` where padded).
     """
     nodes, edge_index = batch["nodes"], batch["edge_index"]
+    if "node_mask" in batch and nodes.shape[1] > 0:
+        num_real = int(batch["node_mask"].reshape(nodes.shape[0], -1).sum(1).max())
+        nodes = nodes[:, : max(num_real, 1)]
     num_graphs, num_nodes = nodes.shape[:2]
     num_edges = edge_index.shape[2]
     keep = batch["edge_mask"].reshape(-1).bool()

@@ -1,0 +1,431 @@
+"""Coverage with robots that have dynamics: quadrotor-like bodies in continuous time.
+
+The same task, observations and agents as :class:`marl_cover.env.CoverageEnv`, but each robot
+is a body (:mod:`marl_cover.dynamics`) that flies to the waypoint it is given:
+
+- **Positions to waypoints.** A robot's measured position is snapped to the nearest waypoint
+  (Euclidean, in the plane); the observations and ``state()`` are built on the snapped
+  waypoints, in the discrete environment's encoding, so discrete policies drive the bodies
+  unchanged. An action is a move from the snapped waypoint.
+- **Targets.** Each robot holds a target waypoint that its position controller tracks at its
+  own altitude. Targets are pairwise distinct: new targets go through the priority-index
+  collision resolver (:mod:`marl_cover.collisions`) against the current targets, and a blocked
+  robot keeps its target.
+- **When robots decide.** ``retarget="arrival"``: a robot takes a new target when it is within
+  ``arrival_radius`` of its current one; a step lasts until at least one robot is ready (whole
+  control periods), and only the ready robots' actions are used (``infos[agent]["ready"]``
+  says which). ``retarget="rate"``: every robot takes a new target every ``control_period``
+  (the paper's 10 Hz loop; a robot is sent on toward a neighbour of the waypoint it is nearest
+  to, so it need not stop at waypoints).
+- **Visiting.** A waypoint is visited when a robot's true position comes within
+  ``visit_radius`` of it in the plane (checked every integration step); reward is +1 per point
+  of interest newly visited, for the whole team, as in coverage. The default radius, half the
+  lattice spacing, is the paper's rule (the waypoint a robot is snapped to is visited), and it
+  keeps the observations in the discrete encoding: a robot's own waypoint is always visited.
+  With a smaller radius, a robot between waypoints can be snapped to one it has not visited
+  yet, which discrete policies never saw; fly them in ``"arrival"`` mode then.
+- **Safety.** Robots fly at fixed, distinct altitudes (``altitude_range``). A near-miss is two
+  robots closer than ``safety_distance`` in the plane and within ``same_altitude`` in height;
+  the count of such encounters is in ``infos[agent]["near_misses"]``.
+- **Time.** The episode is truncated after ``max_time`` seconds (``CoverageConfig.max_steps``
+  is not used); ``infos[agent]["time"]`` is the mission time.
+
+With infinite speed and acceleration (:meth:`QuadrotorParams.ideal`) every move takes one
+integration step and this environment reproduces the discrete one step for step (tested).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from marl_cover.collisions import resolve_collisions
+from marl_cover.config import CoverageConfig, config_from_dict
+from marl_cover.dynamics import QuadrotorParams, QuadrotorTeam
+from marl_cover.ego import action_targets
+from marl_cover.env import CoverageEnv, _config_kwargs
+
+RETARGET_MODES = ("arrival", "rate")
+
+
+class WaypointLocator:
+    """Nearest waypoint of points in the plane.
+
+    On a lattice map (every waypoint on a square grid of ``cell_size``) the nearest waypoint of
+    a point is the grid point it rounds to, when that grid point is a waypoint: a table lookup.
+    Points that round to an empty grid point, and maps off the lattice, use a k-d tree.
+
+    Args:
+        graph: The map.
+    """
+
+    def __init__(self, graph: Any) -> None:
+        self.graph = graph
+        self._tree = cKDTree(graph.positions)
+        self._origin = graph.positions.min(axis=0)
+        index = np.rint((graph.positions - self._origin) / graph.cell_size).astype(np.int64)
+        on_lattice = np.allclose(
+            index * graph.cell_size + self._origin, graph.positions, rtol=0, atol=1e-6
+        )
+        self._table: np.ndarray | None = None
+        if on_lattice and len(np.unique(index, axis=0)) == graph.num_nodes:
+            self._table = np.full(index.max(axis=0) + 1, -1, dtype=np.int64)
+            self._table[index[:, 0], index[:, 1]] = np.arange(graph.num_nodes)
+
+    def nearest(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Nearest waypoint ``(P,)`` of each point ``(P, >=2)`` (its first two coordinates) and
+        the distance to it ``(P,)``."""
+        xy = points[:, :2]
+        if self._table is None:
+            dist, node = self._tree.query(xy)
+            return node.astype(np.int64), dist
+        index = np.rint((xy - self._origin) / self.graph.cell_size).astype(np.int64)
+        inside = ((index >= 0) & (index < self._table.shape)).all(axis=1)
+        node = np.full(len(xy), -1, dtype=np.int64)
+        node[inside] = self._table[index[inside, 0], index[inside, 1]]
+        missing = np.flatnonzero(node < 0)
+        if len(missing):
+            node[missing] = self._tree.query(xy[missing])[1]
+        offset = xy - self.graph.positions[node]
+        return node, np.sqrt(np.einsum("ij,ij->i", offset, offset))
+
+
+@dataclass(frozen=True)
+class DynamicsConfig:
+    """Configuration of the continuous-time mode (SI units).
+
+    Attributes:
+        quadrotor: Body and controller parameters (a dict of them is accepted).
+        retarget: ``"arrival"`` (new target on reaching the current one) or ``"rate"`` (every
+            robot every ``control_period``).
+        control_period: Period of the control loop in seconds (the paper's 10 Hz: 0.1); a
+            whole number of integration steps.
+        max_time: Mission length in seconds.
+        visit_radius: A waypoint is visited by a robot within this distance, metres
+            (``None``: half the map's cell size).
+        arrival_radius: A robot has reached its target within this distance, metres.
+        altitude_range: Altitudes of the robots, evenly spaced from the first to the second
+            (metres; the paper's ``linspace(3, 8, R)``).
+        safety_distance: Near-miss distance in the plane, metres.
+        same_altitude: Two robots within this height difference share an altitude, metres.
+        noise_std: Standard deviation of the position measurement noise, metres.
+        delay: Actuation delay in seconds.
+    """
+
+    quadrotor: QuadrotorParams = field(default_factory=QuadrotorParams)
+    retarget: str = "arrival"
+    control_period: float = 0.1
+    max_time: float = 400.0
+    visit_radius: float | None = None
+    arrival_radius: float = 0.5
+    altitude_range: tuple[float, float] = (3.0, 8.0)
+    safety_distance: float = 1.0
+    same_altitude: float = 0.5
+    noise_std: float = 0.0
+    delay: float = 0.0
+
+    def __post_init__(self) -> None:
+        if isinstance(self.quadrotor, dict):
+            object.__setattr__(self, "quadrotor", config_from_dict(QuadrotorParams, self.quadrotor))
+        object.__setattr__(self, "altitude_range", tuple(float(a) for a in self.altitude_range))
+        substeps = self.control_period / self.quadrotor.dt
+        checks = [
+            (self.retarget in RETARGET_MODES, f"retarget must be one of {RETARGET_MODES}"),
+            (
+                self.control_period > 0 and abs(substeps - round(substeps)) < 1e-9,
+                f"control_period ({self.control_period}) must be a positive multiple of "
+                f"quadrotor.dt ({self.quadrotor.dt})",
+            ),
+            (self.max_time > 0, f"max_time must be > 0, got {self.max_time}"),
+            (self.arrival_radius > 0, f"arrival_radius must be > 0, got {self.arrival_radius}"),
+            (
+                self.visit_radius is None or self.visit_radius >= self.arrival_radius,
+                "need visit_radius >= arrival_radius (a reached target is visited)",
+            ),
+            (len(self.altitude_range) == 2, "altitude_range must be (low, high)"),
+            (self.safety_distance >= 0, "safety_distance must be >= 0"),
+            (self.same_altitude >= 0, "same_altitude must be >= 0"),
+            (self.noise_std >= 0, f"noise_std must be >= 0, got {self.noise_std}"),
+            (self.delay >= 0, f"delay must be >= 0, got {self.delay}"),
+        ]
+        for ok, message in checks:
+            if not ok:
+                raise ValueError(f"DynamicsConfig: {message}")
+
+    @property
+    def substeps(self) -> int:
+        """Integration steps per control period."""
+        return round(self.control_period / self.quadrotor.dt)
+
+    @property
+    def max_ticks(self) -> int:
+        """Integration steps in a mission."""
+        return math.ceil(self.max_time / self.quadrotor.dt - 1e-9)
+
+    @classmethod
+    def from_dict(cls, values: dict[str, Any]) -> DynamicsConfig:
+        """Builds the config; unknown keys are errors (also inside ``quadrotor``)."""
+        return config_from_dict(cls, values)
+
+
+class QuadrotorCoverageEnv(CoverageEnv):
+    """Coverage with quadrotor-like robots in continuous time; see the module docstring.
+
+    Args:
+        config: Task configuration (map, robots, points of interest, hops, ...).
+        dynamics: A :class:`DynamicsConfig` or a dict of its fields.
+        **overrides: Fields of :class:`CoverageConfig`.
+    """
+
+    metadata = {**CoverageEnv.metadata, "name": "marl_cover_quadrotor_v0"}
+
+    def __init__(
+        self,
+        config: CoverageConfig | None = None,
+        dynamics: DynamicsConfig | dict[str, Any] | None = None,
+        **overrides: Any,
+    ) -> None:
+        super().__init__(config, **overrides)
+        if isinstance(dynamics, dict):
+            dynamics = DynamicsConfig.from_dict(dynamics)
+        self.dynamics = dynamics or DynamicsConfig()
+        self._locator: WaypointLocator | None = None
+
+    # ------------------------------------------------------------------ public state
+    @property
+    def time(self) -> float:
+        """Mission time in seconds."""
+        return self._tick * self.dynamics.quadrotor.dt
+
+    @property
+    def positions(self) -> np.ndarray:
+        """True positions ``(R, 3)`` in metres (a copy)."""
+        return self._team.position.copy()
+
+    @property
+    def targets(self) -> np.ndarray:
+        """Target waypoint of each robot ``(R,)`` (a copy)."""
+        return self._target.copy()
+
+    @property
+    def ready(self) -> np.ndarray:
+        """Which robots take a new target at the next step ``(R,)`` (a copy)."""
+        return self._ready.copy()
+
+    @property
+    def snapped(self) -> np.ndarray:
+        """Waypoint nearest to each robot's measured position ``(R,)``: the one its
+        observation is built on and its moves start from (a copy)."""
+        return self._robot_node.copy()
+
+    @property
+    def num_visited(self) -> int:
+        """Waypoints visited so far."""
+        return int(self._visited.sum())
+
+    @property
+    def arrived(self) -> np.ndarray:
+        """Which robots are within ``arrival_radius`` of their target ``(R,)`` (a copy)."""
+        return self._arrived.copy()
+
+    @property
+    def seconds_per_hop(self) -> float:
+        """Nominal time of one move: an edge at full speed, plus the time to reach that speed
+        and to brake from it when robots stop at waypoints (``"arrival"``); at least one
+        control period."""
+        q = self.dynamics.quadrotor
+        cruise = self._graph.cell_size / q.max_speed
+        if self.dynamics.retarget == "arrival":
+            cruise += q.max_speed / q.max_accel
+        return max(cruise, self.dynamics.control_period)
+
+    @property
+    def near_misses(self) -> int:
+        """Near-miss encounters so far in the episode."""
+        return self._near_misses
+
+    # ------------------------------------------------------------------ episode
+    def reset(
+        self, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, dict[str, np.ndarray]], dict[str, dict[str, Any]]]:
+        """Starts a mission: the discrete reset, then robots hovering over their start
+        waypoints at their altitudes. ``seed`` and ``options`` as in :meth:`CoverageEnv.reset`."""
+        super().reset(seed=seed, options=options)
+        d = self.dynamics
+        self._visit_radius = d.visit_radius
+        if self._visit_radius is None:
+            self._visit_radius = 0.5 * self._graph.cell_size
+            if self._visit_radius < d.arrival_radius:
+                raise ValueError(
+                    f"arrival_radius {d.arrival_radius} m exceeds half the map's cell size "
+                    f"({self._visit_radius} m), the default visit_radius"
+                )
+        r = self.config.num_robots
+        self._altitude = np.linspace(*d.altitude_range, r)  # (R,)
+        start = np.column_stack([self._graph.positions[self._robot_node], self._altitude])
+        self._team = QuadrotorTeam(d.quadrotor, start, d.noise_std, d.delay, self._rng)
+        self._target = self._robot_node.copy()
+        self._tick = 0
+        self._near_misses = 0
+        self._close_pairs = np.zeros((r, r), dtype=bool)
+        self._ready = np.ones(r, dtype=bool)
+        self._arrived = np.ones(r, dtype=bool)
+        zeros = np.zeros(r, dtype=np.int64)
+        infos = self._continuous_infos(zeros, zeros.astype(bool), zeros.astype(bool))
+        return self._observe(), infos
+
+    def step(
+        self, actions: dict[str, Any]
+    ) -> tuple[
+        dict[str, dict[str, np.ndarray]],
+        dict[str, float],
+        dict[str, bool],
+        dict[str, bool],
+        dict[str, dict[str, Any]],
+    ]:
+        """Applies the ready robots' actions, then flies until a robot is ready again
+        (``"arrival"``) or for one control period (``"rate"``).
+
+        Args:
+            actions: One action in ``[0, 5)`` for every live agent (those of robots that are
+                not ready are checked and ignored).
+
+        Raises:
+            RuntimeError: the episode is over.
+            ValueError: as :meth:`CoverageEnv.step`.
+        """
+        if not self.agents:
+            raise RuntimeError("step() called with no live agents; call reset() first")
+        action = self._read_actions(actions)  # (R,)
+        proposed, invalid = self._propose(action)  # (R,), (R,)
+        self._target = resolve_collisions(self._target, proposed, self.config.allow_swaps)
+        blocked = self._target != proposed
+        new_interest = self._fly()  # (R,)
+        terminated = not (self._interest & ~self._visited).any()
+        truncated = self._tick >= self.dynamics.max_ticks and not terminated
+        self._num_steps += 1
+        self._trails.append(self._robot_node.copy())
+        reward = float(new_interest.sum())
+        observations = self._observe()
+        infos = self._continuous_infos(new_interest, blocked, invalid)
+        agents = self.agents
+        if terminated or truncated:
+            self.agents = []
+        return (
+            observations,
+            dict.fromkeys(agents, reward),
+            dict.fromkeys(agents, terminated),
+            dict.fromkeys(agents, truncated),
+            infos,
+        )
+
+    def _propose(self, action: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Targets the ready robots ask for (from their snapped waypoints); others keep theirs."""
+        slots = action_targets(self._graph, self._robot_node)  # (R, 5)
+        wanted = slots[np.arange(len(action)), action]
+        invalid = (wanted < 0) & self._ready
+        if invalid.any() and self.config.invalid_action == "raise":
+            i = int(np.flatnonzero(invalid)[0])
+            raise ValueError(
+                f"action {action[i]} of {self.possible_agents[i]} is masked out: waypoint "
+                f"{self._robot_node[i]} has no neighbour that way"
+            )
+        wanted = np.where(wanted < 0, self._robot_node, wanted)
+        return np.where(self._ready, wanted, self._target), invalid
+
+    def _fly(self) -> np.ndarray:
+        """Integrates whole control periods; returns each robot's new points of interest."""
+        d = self.dynamics
+        goal = np.column_stack([self._graph.positions[self._target], self._altitude])  # (R, 3)
+        new_interest = np.zeros(self.config.num_robots, dtype=np.int64)
+        r = self.config.num_robots
+        track = np.empty((d.substeps, r, 3))  # positions at each integration step
+        while True:
+            self._team.advance(goal, d.substeps, track)
+            self._tick += d.substeps
+            # Visits, checked at every integration step (one lookup for the whole period).
+            near, dist = self._nearest(track.reshape(-1, 3))
+            near, dist = near.reshape(d.substeps, r), dist.reshape(d.substeps, r)
+            reached = (dist <= self._visit_radius) & ~self._visited[near]
+            for k in np.flatnonzero(reached.any(axis=1)):  # in time order, for the credits
+                new_interest += self._mark_visited(np.where(reached[k], near[k], -1))
+            self._count_near_misses()
+            measured = self._team.measure()
+            self._robot_node, _ = self._nearest(measured)
+            offset = measured[:, :2] - self._graph.positions[self._target]
+            self._arrived = np.einsum("ij,ij->i", offset, offset) <= d.arrival_radius**2
+            self._ready = self._arrived if d.retarget == "arrival" else np.ones_like(self._ready)
+            done = self._tick >= d.max_ticks or not (self._interest & ~self._visited).any()
+            if self._ready.any() or done:
+                return new_interest
+
+    def _nearest(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Nearest waypoint ``(R,)`` and its distance in the plane ``(R,)``."""
+        if self._locator is None or self._locator.graph is not self._graph:
+            self._locator = WaypointLocator(self._graph)
+        return self._locator.nearest(points)
+
+    def _count_near_misses(self) -> None:
+        """Counts pairs that came within the safety distance at one altitude (once per
+        encounter)."""
+        d = self.dynamics
+        p = self._team.position
+        planar = np.linalg.norm(p[:, None, :2] - p[None, :, :2], axis=-1)
+        vertical = np.abs(p[:, None, 2] - p[None, :, 2])
+        close = (planar < d.safety_distance) & (vertical < d.same_altitude)
+        np.fill_diagonal(close, False)
+        self._near_misses += int(np.triu(close & ~self._close_pairs).sum())
+        self._close_pairs = close
+
+    def _continuous_infos(
+        self, new_interest: np.ndarray, blocked: np.ndarray, invalid: np.ndarray
+    ) -> dict[str, dict[str, Any]]:
+        infos = self._infos(new_interest, blocked, invalid)
+        for i, info in enumerate(infos.values()):
+            info.update(
+                time=self.time,
+                ready=bool(self._ready[i]),
+                target=int(self._target[i]),
+                position=self._team.position[i].copy(),
+                near_misses=self._near_misses,
+            )
+        return infos
+
+    def snapshot(self):  # noqa: ANN201 (CoverageSnapshot)
+        """The discrete snapshot for planners, with each robot at its target waypoint (where
+        it is bound) and time counted in nominal moves (:attr:`seconds_per_hop`): ``num_steps``
+        moves done, ``max_steps`` in the mission."""
+        hop = self.seconds_per_hop
+        return dataclasses.replace(
+            super().snapshot(),
+            robot_node=self._target.copy(),
+            num_steps=math.floor(self.time / hop + 1e-9),
+            max_steps=math.ceil(self.dynamics.max_time / hop - 1e-9),
+        )
+
+
+def parallel_env(
+    config: CoverageConfig | None = None,
+    dynamics: DynamicsConfig | dict[str, Any] | None = None,
+    **kwargs: Any,
+) -> QuadrotorCoverageEnv:
+    """The quadrotor coverage environment as a PettingZoo ``ParallelEnv``.
+
+    Args:
+        config: A full :class:`CoverageConfig`; keyword arguments override its fields.
+        dynamics: A :class:`DynamicsConfig` or a dict of its fields.
+        **kwargs: Fields of :class:`CoverageConfig`.
+    """
+    return QuadrotorCoverageEnv(config, dynamics, **_config_kwargs(kwargs))
+
+
+def env(config=None, dynamics=None, **kwargs: Any):  # noqa: ANN001, ANN201 (PettingZoo type)
+    """The quadrotor coverage environment as a PettingZoo AEC env (``parallel_to_aec``)."""
+    from pettingzoo.utils.conversions import parallel_to_aec
+
+    return parallel_to_aec(parallel_env(config, dynamics, **kwargs))

@@ -1,0 +1,177 @@
+"""Quadrotor-like point-mass bodies tracking waypoints with a cascaded position controller.
+
+Each robot is a 3-D double integrator with linear drag, driven by the acceleration its
+actuators can produce, and a position controller of the kind that flies small quadrotors
+(cascaded: a position loop gives a desired velocity, a velocity loop gives the commanded
+acceleration):
+
+    v_des = clip(k_p * (target - p), max_speed)                         # position loop
+    u     = clip(k_v * (v_des - v) + (drag / mass) * v, max_accel)      # velocity loop + drag
+    v'    = v + dt * (u - (drag / mass) * v)                            # body (semi-implicit
+    p'    = p + dt * v'                                                 #  Euler)
+
+``clip(x, c)`` scales a vector down to norm ``c``. ``u`` is what the actuators deliver, so its
+norm never exceeds ``max_accel``. When ``dt * max(k_v, drag / mass) <= 1`` (checked), ``v'`` is
+a convex combination of ``v``, ``v_des`` and ``0``, so the speed never exceeds ``max_speed``.
+With infinite limits, no drag and ``k_p = k_v = 1 / dt`` the controller is dead-beat: a body
+reaches its target in one step and stops there (the discrete environment's move).
+
+Optional: Gaussian noise on the measured position the controller feeds back (``noise_std``,
+metres) and an actuation delay (targets take effect ``delay`` seconds after they are sent).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+#: Standard gravity, m/s^2.
+GRAVITY = 9.81
+
+
+@dataclass(frozen=True)
+class QuadrotorParams:
+    """Physical and controller parameters of one robot (SI units).
+
+    Defaults: a ~0.7 kg quadrotor of the AscTec Hummingbird class (the airframe of the
+    simulator the paper flew; mass with battery 0.71 kg) with a 20 degree tilt limit
+    (horizontal acceleration ``g * tan(20 deg) = 3.6 m/s^2``), linear rotor drag 0.25 N s/m, and
+    the 2 m/s speed cap of the paper's AirSim controller (``reference_impl.md`` 6.2).
+
+    Attributes:
+        mass: Mass in kg.
+        drag: Linear drag coefficient in N s/m (force ``-drag * v``).
+        max_speed: Speed limit in m/s (``inf``: none).
+        max_accel: Largest acceleration the actuators deliver, m/s^2 (``inf``: none).
+        position_gain: ``k_p`` of the position loop, 1/s.
+        velocity_gain: ``k_v`` of the velocity loop, 1/s.
+        dt: Integration step in seconds.
+    """
+
+    mass: float = 0.71
+    drag: float = 0.25
+    max_speed: float = 2.0
+    max_accel: float = GRAVITY * math.tan(math.radians(20.0))
+    position_gain: float = 1.5
+    velocity_gain: float = 4.0
+    dt: float = 0.01
+
+    def __post_init__(self) -> None:
+        positive = ("mass", "max_speed", "max_accel", "position_gain", "velocity_gain", "dt")
+        for name in positive:
+            if not getattr(self, name) > 0:
+                raise ValueError(f"QuadrotorParams.{name} must be > 0, got {getattr(self, name)}")
+        if self.drag < 0:
+            raise ValueError(f"QuadrotorParams.drag must be >= 0, got {self.drag}")
+        stiffest = max(self.velocity_gain, self.drag / self.mass)
+        if self.dt * stiffest > 1.0 + 1e-12:
+            raise ValueError(
+                f"dt * max(velocity_gain, drag / mass) = {self.dt * stiffest:.3g} must be <= 1 "
+                "(the integration would overshoot the velocity loop)"
+            )
+
+    @classmethod
+    def ideal(cls, dt: float = 0.01) -> QuadrotorParams:
+        """Infinite speed and acceleration with dead-beat gains: every move takes one step."""
+        return cls(
+            mass=1.0,
+            drag=0.0,
+            max_speed=math.inf,
+            max_accel=math.inf,
+            position_gain=1.0 / dt,
+            velocity_gain=1.0 / dt,
+            dt=dt,
+        )
+
+
+def clip_norm(vectors: np.ndarray, limit: float) -> np.ndarray:
+    """Scales each row of ``vectors`` ``(N, D)`` down to norm ``limit`` (no-op for ``inf``)."""
+    if math.isinf(limit):
+        return vectors
+    squared = np.einsum("ij,ij->i", vectors, vectors)
+    if squared.max() <= limit * limit:
+        return vectors
+    return vectors * np.minimum(1.0, limit / np.sqrt(squared + 1e-300))[:, None]
+
+
+class QuadrotorTeam:
+    """The bodies of a team, stepped together (positions and velocities ``(R, 3)``).
+
+    Args:
+        params: Parameters shared by the team.
+        positions: Start positions ``(R, 3)`` in metres (at rest).
+        noise_std: Standard deviation of the position measurement noise, metres.
+        delay: Actuation delay in seconds (rounded to whole steps).
+        rng: Generator of the measurement noise (required when ``noise_std > 0``).
+    """
+
+    def __init__(
+        self,
+        params: QuadrotorParams,
+        positions: np.ndarray,
+        noise_std: float = 0.0,
+        delay: float = 0.0,
+        rng: np.random.Generator | None = None,
+    ) -> None:
+        if noise_std < 0 or delay < 0:
+            raise ValueError(f"noise_std and delay must be >= 0, got {noise_std} and {delay}")
+        if noise_std > 0 and rng is None:
+            raise ValueError("noise_std > 0 needs a generator (rng)")
+        self.params = params
+        self.position = np.array(positions, dtype=np.float64)  # (R, 3)
+        if self.position.ndim != 2 or self.position.shape[1] != 3:
+            raise ValueError(f"positions must have shape (R, 3), got {self.position.shape}")
+        self.velocity = np.zeros_like(self.position)  # (R, 3)
+        self.acceleration = np.zeros_like(self.position)  # (R, 3), last actuator command
+        self.noise_std = noise_std
+        self._rng = rng
+        delay_steps = round(delay / params.dt)
+        # Targets sent but not yet acting; the oldest acts now.
+        self._pipeline: deque[np.ndarray] = deque(
+            [self.position.copy() for _ in range(delay_steps + 1)], maxlen=delay_steps + 1
+        )
+        self._drag_rate = params.drag / params.mass
+
+    @property
+    def num_robots(self) -> int:
+        """Number of bodies."""
+        return len(self.position)
+
+    def measure(self) -> np.ndarray:
+        """Measured positions ``(R, 3)``: the true ones plus the measurement noise."""
+        if self.noise_std == 0:
+            return self.position
+        return self.position + self._rng.normal(0.0, self.noise_std, self.position.shape)
+
+    def step(self, targets: np.ndarray) -> None:
+        """Sends ``targets`` ``(R, 3)`` and advances every body by one ``dt``."""
+        self.advance(targets, 1)
+
+    def advance(self, targets: np.ndarray, steps: int, track: np.ndarray | None = None) -> None:
+        """Holds ``targets`` ``(R, 3)`` for ``steps`` steps of ``dt``.
+
+        Args:
+            targets: Target of each body, metres.
+            steps: Integration steps.
+            track: Optional ``(steps, R, 3)`` array that receives the positions after each step.
+        """
+        p = self.params
+        targets = np.asarray(targets, dtype=np.float64)
+        drag_rate, dt = self._drag_rate, p.dt
+        position, velocity = self.position, self.velocity
+        acceleration = self.acceleration
+        for k in range(steps):
+            self._pipeline.append(targets)
+            measured = position if self.noise_std == 0 else self.measure()
+            v_des = clip_norm(p.position_gain * (self._pipeline[0] - measured), p.max_speed)
+            command = p.velocity_gain * (v_des - velocity) + drag_rate * velocity
+            acceleration = clip_norm(command, p.max_accel)
+            velocity = velocity + dt * (acceleration - drag_rate * velocity)
+            position = position + dt * velocity
+            self.position = position
+            if track is not None:
+                track[k] = position
+        self.velocity, self.acceleration = velocity, acceleration

@@ -1,0 +1,224 @@
+"""Quadrotor bodies, their controller, and the continuous-time coverage environment."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from pettingzoo.test import parallel_api_test, parallel_seed_test
+
+import marl_cover
+from marl_cover.continuous import DynamicsConfig, QuadrotorCoverageEnv, WaypointLocator
+from marl_cover.dynamics import QuadrotorParams, QuadrotorTeam
+from tests.helpers import random_grid_graph
+
+
+def fly(params: QuadrotorParams, target: np.ndarray, seconds: float, **team_kwargs) -> dict:
+    team = QuadrotorTeam(params, np.zeros((1, 3)), **team_kwargs)
+    steps = round(seconds / params.dt)
+    track = np.empty((steps, 1, 3))
+    speeds, accels = [], []
+    for k in range(steps):
+        team.step(target[None])
+        track[k] = team.position
+        speeds.append(np.linalg.norm(team.velocity))
+        accels.append(np.linalg.norm(team.acceleration))
+    return {"track": track[:, 0], "speed": np.array(speeds), "accel": np.array(accels)}
+
+
+# ---------------------------------------------------------------------- the controller
+@pytest.mark.parametrize("drag", [0.0, 0.25, 2.0])
+def test_controller_reaches_the_target_within_its_limits(drag: float) -> None:
+    params = QuadrotorParams(drag=drag, max_speed=2.0, max_accel=3.0)
+    target = np.array([20.0, -5.0, 4.0])
+    out = fly(params, target, seconds=30.0)
+    assert np.linalg.norm(out["track"][-1] - target) < 0.01
+    assert out["speed"].max() <= 2.0 + 1e-12
+    assert out["accel"].max() <= 3.0 + 1e-12
+    # The limits are reached on the way (the 21 m flight is long enough); strong drag caps the
+    # speed where it eats the whole acceleration: terminal speed max_accel * mass / drag.
+    top = min(2.0, 3.0 * params.mass / drag) if drag else 2.0
+    assert top - 1e-3 < out["speed"].max() and out["accel"].max() > 2.99
+    # At 2 m/s, 21 m take at least 10.5 s: the body is still short of the target at 10 s.
+    assert np.linalg.norm(out["track"][999] - target) > 0.5
+
+
+def test_ideal_dynamics_move_in_one_step_and_stop() -> None:
+    params = QuadrotorParams.ideal(dt=0.01)
+    out = fly(params, np.array([5.0, 0.0, 3.0]), seconds=0.05)
+    np.testing.assert_allclose(out["track"], np.tile([5.0, 0.0, 3.0], (5, 1)), atol=1e-9)
+    assert out["speed"][1:].max() < 1e-9
+
+
+def test_actuation_delay_holds_the_old_target() -> None:
+    params = QuadrotorParams()
+    out = fly(params, np.array([5.0, 0.0, 0.0]), seconds=1.0, delay=0.3)
+    assert np.all(out["track"][:30] == 0.0)  # the first 30 steps still track the start
+    assert out["track"][31, 0] > 0.0
+
+
+def test_measurement_noise_is_seeded() -> None:
+    params = QuadrotorParams()
+    target = np.array([5.0, 0.0, 0.0])
+    a = fly(params, target, 2.0, noise_std=0.1, rng=np.random.default_rng(3))
+    b = fly(params, target, 2.0, noise_std=0.1, rng=np.random.default_rng(3))
+    clean = fly(params, target, 2.0)
+    assert np.array_equal(a["track"], b["track"])
+    assert not np.array_equal(a["track"], clean["track"])
+
+
+def test_bad_parameters_are_named() -> None:
+    with pytest.raises(ValueError, match="max_speed"):
+        QuadrotorParams(max_speed=0.0)
+    with pytest.raises(ValueError, match="velocity_gain"):
+        QuadrotorParams(velocity_gain=200.0, dt=0.01)
+    with pytest.raises(ValueError, match="control_period"):
+        DynamicsConfig(control_period=0.015)
+    with pytest.raises(TypeError, match="unknown QuadrotorParams key.*'mas'"):
+        DynamicsConfig.from_dict({"quadrotor": {"mas": 1.0}})
+    with pytest.raises(ValueError, match="noise_std and delay"):
+        QuadrotorTeam(QuadrotorParams(), np.zeros((1, 3)), noise_std=-1.0)
+
+
+# ---------------------------------------------------------------------- snapping
+def test_locator_matches_a_kd_tree_on_and_off_the_lattice() -> None:
+    rng = np.random.default_rng(0)
+    lattice = random_grid_graph(rng, 12, 15, 0.3)
+    points = rng.uniform(-10, 90, size=(500, 2))
+    shifted = lattice.positions.copy()
+    shifted[0] += [0.3, 0.0]  # one waypoint off the lattice: the k-d tree answers everything
+    off_lattice = marl_cover.SpatialGraph(shifted, lattice.neighbors, lattice.cell_size)
+    for graph in (lattice, off_lattice):
+        locator = WaypointLocator(graph)
+        node, dist = locator.nearest(points)
+        truth = np.linalg.norm(points[:, None] - graph.positions[None], axis=-1)
+        np.testing.assert_allclose(dist, truth.min(axis=1), atol=1e-9)
+        assert np.all(truth[np.arange(len(points)), node] <= truth.min(axis=1) + 1e-9)
+
+
+# ---------------------------------------------------------------------- the environment
+def line_env(path_graph, num_robots: int = 1, **dynamics) -> QuadrotorCoverageEnv:
+    return QuadrotorCoverageEnv(graph=path_graph, num_robots=num_robots, dynamics=dynamics)
+
+
+def test_arrival_mode_flies_one_edge_per_step_and_visits_on_the_way(path_graph) -> None:
+    env = line_env(path_graph, visit_radius=1.0)
+    obs, infos = env.reset(seed=0, options={"robot_nodes": [0], "interest_nodes": [1, 2, 5]})
+    assert infos["robot_0"]["ready"] and infos["robot_0"]["time"] == 0.0
+    _, rewards, _, _, infos = env.step({"robot_0": 1})  # east
+    info = infos["robot_0"]
+    assert rewards["robot_0"] == 1.0 and info["new_interest"] == 1
+    assert info["ready"] and info["target"] == 1
+    assert abs(info["position"][0] - 5.0) <= 0.5  # within the arrival radius
+    assert 2.5 <= info["time"] <= 5.0  # 5 m at <= 2 m/s, plus accelerating and braking
+    assert env.snapped.tolist() == [1]
+    _, rewards, *_ = env.step({"robot_0": 0})  # stay: ready again after one period
+    assert rewards["robot_0"] == 0.0 and math.isclose(env.time, info["time"] + 0.1)
+
+
+def test_rate_mode_snaps_to_the_nearest_waypoint(path_graph) -> None:
+    env = line_env(path_graph, retarget="rate")
+    env.reset(seed=0, options={"robot_nodes": [0], "interest_nodes": [3]})
+    for _ in range(40):
+        env.step({"robot_0": 1})  # keep heading east from wherever it is snapped
+        x = env.positions[0, 0]
+        assert env.snapped[0] == int(np.floor(x / 5.0 + 0.5))
+        assert env.snapshot().visited[env.snapped[0]]  # its own waypoint is visited
+    assert 4.0 < env.positions[0, 0] < 9.0  # 4 s at up to 2 m/s, smoothly past waypoint 1
+
+
+def test_only_ready_robots_take_new_targets(path_graph) -> None:
+    env = line_env(path_graph, num_robots=2)
+    env.reset(seed=0, options={"robot_nodes": [0, 7], "interest_nodes": [3]})
+    env.step({"robot_0": 1, "robot_1": 0})  # robot_1 stays: ready after one period
+    assert env.targets.tolist() == [1, 7] and env.ready.tolist() == [False, True]
+    _, _, _, _, infos = env.step({"robot_0": 3, "robot_1": 3})  # robot_0 is not ready
+    assert env.targets.tolist() == [1, 6]
+    assert infos["robot_0"]["target"] == 1
+
+
+def test_targets_go_through_the_collision_resolver(path_graph) -> None:
+    env = line_env(path_graph, num_robots=2)
+    env.reset(seed=0, options={"robot_nodes": [2, 4], "interest_nodes": [3]})
+    _, _, _, _, infos = env.step({"robot_0": 1, "robot_1": 3})  # both want waypoint 3
+    assert env.targets.tolist() == [3, 4]  # the lower index wins, the other keeps its own
+    assert infos["robot_1"]["blocked"] and not infos["robot_0"]["blocked"]
+
+
+@pytest.mark.parametrize("altitudes, expected", [((5.0, 5.0), 1), ((3.0, 8.0), 0)])
+def test_near_misses_count_crossings_at_one_altitude(path_graph, altitudes, expected) -> None:
+    env = line_env(path_graph, num_robots=2, altitude_range=altitudes)
+    env.reset(seed=0, options={"robot_nodes": [3, 4], "interest_nodes": [0]})
+    env.step({"robot_0": 1, "robot_1": 3})  # they swap along one edge
+    while not env.ready.all():
+        env.step({"robot_0": 0, "robot_1": 0})
+    assert env.targets.tolist() == [4, 3]
+    assert env.near_misses == expected
+
+
+@pytest.mark.parametrize("retarget", ["arrival", "rate"])
+def test_infinite_speed_and_acceleration_reproduce_the_discrete_env(retarget: str) -> None:
+    config = {"map": "city", "num_robots": 4, "city_size": 120, "hops": 5}
+    for seed in range(3):
+        discrete = marl_cover.parallel_env(max_steps=25, **config)
+        dynamics = DynamicsConfig(
+            quadrotor=QuadrotorParams.ideal(), retarget=retarget, max_time=2.5
+        )
+        continuous = QuadrotorCoverageEnv(dynamics=dynamics, **config)
+        obs_d, _ = discrete.reset(seed=seed)
+        obs_c, _ = continuous.reset(seed=seed)
+        rng = np.random.default_rng(seed)
+        steps = 0
+        while discrete.agents:
+            actions = {a: int(rng.choice(np.flatnonzero(obs_d[a]["action_mask"]))) for a in obs_d}
+            obs_d, rew_d, term_d, trunc_d, info_d = discrete.step(actions)
+            obs_c, rew_c, term_c, trunc_c, info_c = continuous.step(actions)
+            steps += 1
+            for agent in obs_d:
+                for key in obs_d[agent]:
+                    assert np.array_equal(obs_d[agent][key], obs_c[agent][key]), (steps, key)
+                assert info_d[agent]["new_interest"] == info_c[agent]["new_interest"]
+                assert info_d[agent]["blocked"] == info_c[agent]["blocked"]
+            assert (rew_d, term_d, trunc_d) == (rew_c, term_c, trunc_c)
+            assert np.array_equal(discrete.state()["nodes"], continuous.state()["nodes"])
+        assert not continuous.agents and steps == 25
+        assert math.isclose(continuous.time, 2.5)
+
+
+def small_quadrotor_env(**dynamics) -> QuadrotorCoverageEnv:
+    return marl_cover.quadrotor_parallel_env(
+        map="city",
+        num_robots=3,
+        city_size=80,
+        hops=4,
+        dynamics={"max_time": 20.0, **dynamics},
+    )
+
+
+@pytest.mark.filterwarnings("ignore:reset ignores unknown option")
+def test_pettingzoo_api_and_seeding() -> None:
+    parallel_api_test(small_quadrotor_env(), num_cycles=200)
+    parallel_seed_test(lambda: small_quadrotor_env(noise_std=0.2, delay=0.1))
+
+
+def test_same_seed_and_actions_give_the_same_flight_bit_for_bit() -> None:
+    runs = []
+    for _ in range(2):
+        env = small_quadrotor_env(noise_std=0.3)
+        obs, _ = env.reset(seed=5)
+        rng = np.random.default_rng(1)
+        trace = []
+        while env.agents:
+            actions = {a: int(rng.choice(np.flatnonzero(obs[a]["action_mask"]))) for a in obs}
+            obs, rewards, _, _, infos = env.step(actions)
+            trace.append((env.time, env.positions.tobytes(), rewards["robot_0"]))
+        runs.append(trace)
+    assert runs[0] == runs[1] and len(runs[0]) > 5
+
+
+def test_registered_id_makes_the_quadrotor_env() -> None:
+    import pettingzoo
+
+    env = pettingzoo.make("parallel", "marl_cover/CoverageQuadrotor-v0", map="city", city_size=60)
+    assert isinstance(env, QuadrotorCoverageEnv)

@@ -1,0 +1,125 @@
+"""Missions: discrete policies driving the quadrotor environment, and scripts/run_mission.py."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from agents.experts.expert import RoutingExpert
+from agents.greedy import CentralizedGreedyPolicy, GreedyPolicy
+from agents.mission import MissionConfig, MissionExpert, make_mission_policy, run_mission
+from marl_cover.continuous import QuadrotorCoverageEnv
+
+ROOT = Path(__file__).resolve().parent.parent
+SMALL = {"map": "city", "num_robots": 3, "city_size": 80, "hops": 6}
+
+
+def small_env(max_time: float = 60.0, **dynamics) -> QuadrotorCoverageEnv:
+    return QuadrotorCoverageEnv(dynamics={"max_time": max_time, **dynamics}, **SMALL)
+
+
+def test_mission_curve_counts_the_rewards() -> None:
+    env = small_env()
+    result = run_mission(env, GreedyPolicy(6), seed=3)
+    curve = np.array(result.visited)
+    assert curve.shape == (61,) and curve[0] == 0
+    assert np.all(np.diff(curve) >= 0) and curve[-1] == result.total
+    snapshot = env.snapshot()
+    starts = env.config.num_robots  # start waypoints are visited without reward
+    assert (
+        result.total <= int((snapshot.interest & snapshot.visited).sum()) <= result.total + starts
+    )
+    assert result.mission_seconds == pytest.approx(60.0)
+    assert result.decisions <= result.steps
+
+
+def test_cached_decisions_give_the_same_mission() -> None:
+    """Asking a deterministic policy again when nothing it sees has changed is skipped; an
+    uncached run (greedy behind act_env, which is never cached) flies the same mission."""
+
+    class Uncached:
+        def __init__(self) -> None:
+            self.policy = CentralizedGreedyPolicy(6)
+
+        def act_env(self, env: QuadrotorCoverageEnv) -> dict[str, int]:
+            actions = self.policy.act_state(env.state())
+            return dict(zip(env.possible_agents, actions.tolist(), strict=True))
+
+    cached = run_mission(small_env(retarget="rate"), CentralizedGreedyPolicy(6), seed=1)
+    uncached = run_mission(small_env(retarget="rate"), Uncached(), seed=1)
+    assert cached.visited == uncached.visited
+    assert cached.decisions < uncached.decisions == uncached.steps
+
+
+def test_expert_follows_its_route_on_a_line(path_graph) -> None:
+    env = QuadrotorCoverageEnv(graph=path_graph, num_robots=1, dynamics={"max_time": 60.0})
+    expert = MissionExpert(RoutingExpert(max_iterations=50))
+    options = {"robot_nodes": [2], "interest_nodes": [0, 6]}
+    env.reset(seed=0, options=options)
+    visits = []
+    while env.agents:
+        _, rewards, *_ = env.step(expert.act_env(env))
+        if rewards["robot_0"]:
+            visits.append((round(env.time, 1), int(env.targets[0])))
+    # Nearer end first (2 hops west), then 6 hops east; done long before 60 s.
+    assert [node for _, node in visits] == [0, 6]
+    assert visits[-1][0] < 40.0
+    assert expert.counts["solves"] == 1
+
+
+@pytest.mark.parametrize("retarget", ["arrival", "rate"])
+def test_golden_greedy_mission(retarget: str) -> None:
+    env = small_env(retarget=retarget, altitude_range=(5.0, 5.0))  # one altitude for all
+    result = run_mission(env, GreedyPolicy(6), seed=0)
+    curve = result.visited
+    observed = (result.total, result.steps, curve[10], curve[20], curve[40], result.near_misses)
+    assert observed == GOLDEN[retarget]
+
+
+# (total, steps, visited by 10 s, 20 s, 40 s, near-misses): flying on without stopping at
+# waypoints ("rate") visits sooner; greedy never crosses another robot here.
+GOLDEN = {"arrival": (23, 266, 6, 12, 20, 0), "rate": (23, 600, 7, 14, 21, 0)}
+
+
+def test_mission_config_rejects_unknown_methods_and_keys() -> None:
+    with pytest.raises(ValueError, match="unknown mission method.*'gnn2'"):
+        MissionConfig(methods=["gnn2"])
+    from agents.configuration import load
+
+    with pytest.raises(ValueError, match="unknown key.*'speed'"):
+        load(MissionConfig, None, ["dynamics.quadrotor.speed=3"])
+    config = load(MissionConfig, ROOT / "configs/mission.yaml", ["dynamics.retarget=rate"])
+    assert config.dynamics.retarget == "rate" and config.dynamics.quadrotor.mass == 0.71
+    assert isinstance(make_mission_policy("greedy", config), GreedyPolicy)
+
+
+def test_run_mission_script(tmp_path: Path) -> None:
+    out = tmp_path / "mission"
+    args = [
+        sys.executable,
+        str(ROOT / "scripts/run_mission.py"),
+        "map=city",
+        "num_robots=3",
+        "hops=6",
+        "seeds=2",
+        "methods=[greedy,gnn]",
+        "dynamics.max_time=15.0",
+        f"out={out}",
+        "frame_every=3.0",
+    ]
+    done = subprocess.run(args, capture_output=True, text=True, cwd=ROOT, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    summary = json.loads((out / "mission.json").read_text())
+    assert set(summary["methods"]) == {"greedy", "gnn"} and summary["seeds"] == [0, 1]
+    runs = [json.loads((out / "runs" / f"gnn_{s}.json").read_text()) for s in (0, 1)]
+    assert summary["methods"]["gnn"]["totals"] == [r["total"] for r in runs]
+    assert (out / "mission.png").stat().st_size > 0
+    assert (out / "mission_gnn.gif").read_bytes()[:3] == b"GIF"
+    # A second run reads the missions back instead of flying them again.
+    again = subprocess.run(args, capture_output=True, text=True, cwd=ROOT, timeout=300)
+    assert again.returncode == 0 and "seed" not in again.stdout.split("points of interest")[0]
