@@ -71,6 +71,20 @@ def table(config: MissionConfig, results: dict[str, list[dict]]) -> dict:
     for i, seed in enumerate(seeds):
         print(f"{seed:4d}  " + "".join(f"{totals[m][i]:12.0f}" for m in totals))
     summary: dict = {"config": as_dict(config), "seeds": seeds, "methods": {}}
+    horizon = len(results[next(iter(results))][0]["visited"]) - 1
+    times = list(range(0, horizon + 1, max(1, horizon // 8)))
+    print("\npoints of interest visited over time (mean over the seeds)")
+    print("time (s)  " + "".join(f"{m:>12s}" for m in totals))
+    for t in times:
+        means = [np.mean([r["visited"][t] for r in results[m]]) for m in totals]
+        print(f"{t:8d}  " + "".join(f"{v:12.1f}" for v in means))
+    summary["over_time"] = {
+        "seconds": times,
+        **{
+            m: [float(np.mean([r["visited"][t] for r in results[m]])) for t in times]
+            for m in totals
+        },
+    }
     print("\nmethod        mean +- SEM    ratio to greedy (paired)   real time x (min)  paper")
     for method, values in totals.items():
         speed = np.array([r["real_time_factor"] for r in results[method]])
