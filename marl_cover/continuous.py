@@ -396,6 +396,12 @@ class QuadrotorCoverageEnv(CoverageEnv):
             )
         return infos
 
+    def _progress_text(self) -> str:
+        return f"t = {self.time:.1f}/{self.dynamics.max_time:.0f} s"
+
+    def _robot_xy(self) -> np.ndarray:
+        return self._team.position[:, :2]
+
     def snapshot(self):  # noqa: ANN201 (CoverageSnapshot)
         """The discrete snapshot for planners, with each robot at its target waypoint (where
         it is bound) and time counted in nominal moves (:attr:`seconds_per_hop`): ``num_steps``

@@ -446,9 +446,17 @@ class CoverageEnv(ParallelEnv):
             self._interest,
             self._visited,
             np.stack(self._trails),
-            title=f"step {self._num_steps}/{self.config.max_steps}   "
+            title=f"{self._progress_text()}   "
             f"covered {int((self._interest & self._visited).sum())}/{int(self._interest.sum())}",
+            robot_xy=self._robot_xy(),
         )
+
+    def _progress_text(self) -> str:
+        return f"step {self._num_steps}/{self.config.max_steps}"
+
+    def _robot_xy(self) -> np.ndarray | None:
+        """Where to draw the robots (``None``: on their waypoints)."""
+        return None
 
     def close(self) -> None:
         """Closes the render window, if any."""

@@ -95,10 +95,14 @@ class Renderer:
         visited: np.ndarray,
         trails: np.ndarray,
         title: str = "",
+        robot_xy: np.ndarray | None = None,
     ) -> np.ndarray | None:
-        """Redraws the episode; returns the pixels in ``"rgb_array"`` mode."""
+        """Redraws the episode; returns the pixels in ``"rgb_array"`` mode.
+
+        ``robot_xy`` ``(R, 2)`` draws the robots at these positions (robots between waypoints).
+        """
         self.ax.clear()
-        draw_map(self.ax, graph, robot_node, interest, visited, trails)
+        draw_map(self.ax, graph, robot_node, interest, visited, trails, robot_xy=robot_xy)
         self.ax.set_title(title)
         if self.mode == "rgb_array":
             return figure_to_array(self.fig)

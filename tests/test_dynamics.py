@@ -222,3 +222,14 @@ def test_registered_id_makes_the_quadrotor_env() -> None:
 
     env = pettingzoo.make("parallel", "marl_cover/CoverageQuadrotor-v0", map="city", city_size=60)
     assert isinstance(env, QuadrotorCoverageEnv)
+
+
+def test_render_draws_robots_between_waypoints(path_graph) -> None:
+    env = QuadrotorCoverageEnv(graph=path_graph, num_robots=1, render_mode="rgb_array")
+    env.reset(seed=0, options={"robot_nodes": [0], "interest_nodes": [3]})
+    at_start = env.render()
+    env.step({"robot_0": 1})
+    moved = env.render()
+    env.close()
+    assert at_start.shape == moved.shape and at_start.dtype == np.uint8
+    assert not np.array_equal(at_start, moved)
