@@ -48,7 +48,7 @@ from marl_cover.collisions import resolve_collisions
 from marl_cover.config import CoverageConfig, config_from_dict
 from marl_cover.dynamics import QuadrotorParams, QuadrotorTeam
 from marl_cover.ego import action_targets
-from marl_cover.env import CoverageEnv, _config_kwargs
+from marl_cover.env import CoverageEnv, StepResult, _config_kwargs
 
 RETARGET_MODES = ("arrival", "rate")
 
@@ -279,15 +279,7 @@ class QuadrotorCoverageEnv(CoverageEnv):
         infos = self._continuous_infos(zeros, zeros.astype(bool), zeros.astype(bool))
         return self._observe(), infos
 
-    def step(
-        self, actions: dict[str, Any]
-    ) -> tuple[
-        dict[str, dict[str, np.ndarray]],
-        dict[str, float],
-        dict[str, bool],
-        dict[str, bool],
-        dict[str, dict[str, Any]],
-    ]:
+    def step(self, actions: dict[str, Any]) -> StepResult:
         """Applies the ready robots' actions, then flies until a robot is ready again
         (``"arrival"``) or for one control period (``"rate"``).
 
@@ -299,30 +291,15 @@ class QuadrotorCoverageEnv(CoverageEnv):
             RuntimeError: the episode is over.
             ValueError: as :meth:`CoverageEnv.step`.
         """
-        if not self.agents:
-            raise RuntimeError("step() called with no live agents; call reset() first")
         action = self._read_actions(actions)  # (R,)
         proposed, invalid = self._propose(action)  # (R,), (R,)
         self._target = resolve_collisions(self._target, proposed, self.config.allow_swaps)
         blocked = self._target != proposed
         new_interest = self._fly()  # (R,)
-        terminated = not (self._interest & ~self._visited).any()
-        truncated = self._tick >= self.dynamics.max_ticks and not terminated
         self._num_steps += 1
         self._trails.append(self._robot_node.copy())
-        reward = float(new_interest.sum())
-        observations = self._observe()
         infos = self._continuous_infos(new_interest, blocked, invalid)
-        agents = self.agents
-        if terminated or truncated:
-            self.agents = []
-        return (
-            observations,
-            dict.fromkeys(agents, reward),
-            dict.fromkeys(agents, terminated),
-            dict.fromkeys(agents, truncated),
-            infos,
-        )
+        return self._step_result(new_interest, self._tick >= self.dynamics.max_ticks, infos)
 
     def _propose(self, action: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Targets the ready robots ask for (from their snapped waypoints); others keep theirs."""
@@ -360,7 +337,7 @@ class QuadrotorCoverageEnv(CoverageEnv):
             offset = measured[:, :2] - self._graph.positions[self._target]
             self._arrived = np.einsum("ij,ij->i", offset, offset) <= d.arrival_radius**2
             self._ready = self._arrived if d.retarget == "arrival" else np.ones_like(self._ready)
-            done = self._tick >= d.max_ticks or not (self._interest & ~self._visited).any()
+            done = self._tick >= d.max_ticks or self._all_covered()
             if self._ready.any() or done:
                 return new_interest
 

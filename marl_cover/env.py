@@ -93,6 +93,15 @@ from marl_cover.ego import (
 from marl_cover.graph import SpatialGraph
 from marl_cover.sources import make_map_source
 
+#: What ``step`` returns: observations, rewards, terminations, truncations, infos by agent.
+StepResult = tuple[
+    dict[str, dict[str, np.ndarray]],
+    dict[str, float],
+    dict[str, bool],
+    dict[str, bool],
+    dict[str, dict[str, Any]],
+]
+
 #: Options ``reset`` understands.
 RESET_OPTIONS = ("robot_nodes", "interest_nodes")
 
@@ -275,15 +284,7 @@ class CoverageEnv(ParallelEnv):
             raise ValueError(f"options[{key!r}] holds a waypoint outside [0, {graph.num_nodes})")
         return nodes
 
-    def step(
-        self, actions: dict[str, Any]
-    ) -> tuple[
-        dict[str, dict[str, np.ndarray]],
-        dict[str, float],
-        dict[str, bool],
-        dict[str, bool],
-        dict[str, dict[str, Any]],
-    ]:
+    def step(self, actions: dict[str, Any]) -> StepResult:
         """Moves every robot one step.
 
         Args:
@@ -294,19 +295,25 @@ class CoverageEnv(ParallelEnv):
             ValueError: an agent is missing or unknown, an action is out of range, or (with
                 ``invalid_action="raise"``) an action is masked out; the message names the robot.
         """
-        if not self.agents:
-            raise RuntimeError("step() called with no live agents; call reset() first")
         action = self._read_actions(actions)  # (R,)
         targets, invalid = self._targets(action)  # (R,), (R,)
         next_node = resolve_collisions(self._robot_node, targets, self.config.allow_swaps)
         blocked = next_node != targets
         new_interest = self._visit(next_node)  # (R,)
         self._num_steps += 1
-        terminated = not (self._interest & ~self._visited).any()
-        truncated = self._num_steps >= self.config.max_steps and not terminated
+        infos = self._infos(new_interest, blocked, invalid)
+        return self._step_result(new_interest, self._num_steps >= self.config.max_steps, infos)
+
+    def _step_result(
+        self, new_interest: np.ndarray, out_of_time: bool, infos: dict[str, dict[str, Any]]
+    ) -> StepResult:
+        """The return of ``step``: observations, the team reward, termination (everything
+        covered), truncation (``out_of_time`` and not terminated) and ``infos``; ends the episode
+        when either holds."""
+        terminated = self._all_covered()
+        truncated = out_of_time and not terminated
         reward = float(new_interest.sum())
         observations = self._observe()
-        infos = self._infos(new_interest, blocked, invalid)
         agents = self.agents
         if terminated or truncated:
             self.agents = []
@@ -318,7 +325,13 @@ class CoverageEnv(ParallelEnv):
             infos,
         )
 
+    def _all_covered(self) -> bool:
+        """Whether every point of interest has been visited."""
+        return not (self._interest & ~self._visited).any()
+
     def _read_actions(self, actions: dict[str, Any]) -> np.ndarray:
+        if not self.agents:
+            raise RuntimeError("step() called with no live agents; call reset() first")
         missing = [a for a in self.agents if a not in actions]
         if missing:
             raise ValueError(f"no action given for {missing}")
@@ -363,8 +376,9 @@ class CoverageEnv(ParallelEnv):
         nodes = node[robots]
         fresh = self._interest[nodes] & ~self._visited[nodes]
         if len(nodes) > 1:  # several robots at one waypoint: only the first gets the credit
-            _, first = np.unique(nodes, return_index=True)
-            fresh &= np.isin(np.arange(len(nodes)), first)
+            first = np.zeros(len(nodes), dtype=bool)
+            first[np.unique(nodes, return_index=True)[1]] = True
+            fresh &= first
         new_interest = np.zeros(len(node), dtype=np.int64)
         new_interest[robots] = fresh
         self._visited[nodes] = True

@@ -47,7 +47,8 @@ def main() -> None:
     )
     for method in args.methods:
         policy = make_mission_policy(method, config)
-        run_mission(env, policy, args.seeds[0]) if method == "gnn" else None  # warm-up
+        if method == "gnn":  # warm-up (first torch calls)
+            run_mission(env, policy, args.seeds[0])
         for seed in args.seeds:
             r = run_mission(env, policy, seed)
             rows.append(
