@@ -107,6 +107,26 @@ RESET_OPTIONS = ("robot_nodes", "interest_nodes")
 
 
 @dataclass(frozen=True)
+class Moves:
+    """What one step did (:meth:`CoverageEnv.apply_actions`).
+
+    Attributes:
+        new_interest: Points of interest each robot visited first this step, ``(R,)`` int64.
+        blocked: Robots the collision resolver kept from their target, ``(R,)`` bool.
+        invalid: Robots whose action was masked out (a no-op), ``(R,)`` bool.
+        terminated: Every point of interest has been visited.
+        out_of_time: The episode has used its ``max_steps`` actions (a truncation unless
+            ``terminated``).
+    """
+
+    new_interest: np.ndarray
+    blocked: np.ndarray
+    invalid: np.ndarray
+    terminated: bool
+    out_of_time: bool
+
+
+@dataclass(frozen=True)
 class CoverageSnapshot:
     """A read-only copy of the environment's state, for planners and experts.
 
@@ -295,14 +315,29 @@ class CoverageEnv(ParallelEnv):
             ValueError: an agent is missing or unknown, an action is out of range, or (with
                 ``invalid_action="raise"``) an action is masked out; the message names the robot.
         """
-        action = self._read_actions(actions)  # (R,)
+        moves = self.apply_actions(self._read_actions(actions))
+        infos = self._infos(moves.new_interest, moves.blocked, moves.invalid)
+        return self._step_result(moves.new_interest, moves.out_of_time, infos)
+
+    def apply_actions(self, action: np.ndarray) -> Moves:
+        """The step's dynamics without the PettingZoo dictionaries (the core that batched
+        environments share): resolves ``action`` ``(R,)`` (integers in ``[0, 5)``, already
+        checked), moves the robots and marks visits. ``step`` is this plus observations and
+        the end-of-episode bookkeeping; after it, :meth:`observe_batch` and :meth:`state` give
+        the new observations.
+        """
         targets, invalid = self._targets(action)  # (R,), (R,)
         next_node = resolve_collisions(self._robot_node, targets, self.config.allow_swaps)
         blocked = next_node != targets
         new_interest = self._visit(next_node)  # (R,)
         self._num_steps += 1
-        infos = self._infos(new_interest, blocked, invalid)
-        return self._step_result(new_interest, self._num_steps >= self.config.max_steps, infos)
+        return Moves(
+            new_interest=new_interest,
+            blocked=blocked,
+            invalid=invalid,
+            terminated=self._all_covered(),
+            out_of_time=self._num_steps >= self.config.max_steps,
+        )
 
     def _step_result(
         self, new_interest: np.ndarray, out_of_time: bool, infos: dict[str, dict[str, Any]]
