@@ -64,7 +64,9 @@ def graph_specs(shape: PaddedShape, lead: tuple[int, ...], device: Any) -> dict[
     """Specs of the padded graph arrays of :data:`GRAPH_ARRAYS` with leading dims ``lead``."""
     m, e = shape.max_nodes, shape.max_edges
     return {
-        "nodes": Bounded(0.0, 1.0, shape=(*lead, m, NUM_NODE_FEATURES), dtype=torch.float32, device=device),
+        "nodes": Bounded(
+            0.0, 1.0, shape=(*lead, m, NUM_NODE_FEATURES), dtype=torch.float32, device=device
+        ),
         "node_pos": Unbounded(shape=(*lead, m, 2), dtype=torch.float32, device=device),
         "node_mask": Binary(shape=(*lead, m), device=device, dtype=torch.bool),
         "edge_index": Bounded(0, m - 1, shape=(*lead, 2, e), dtype=torch.int64, device=device),
@@ -113,7 +115,9 @@ class BatchedCoverageEnv(EnvBase):
         n, r, device = self.num_envs, self.num_robots, self.device
         core = self.envs[0]
         group: dict[str, Any] = {
-            "action_mask": Binary(n=NUM_ACTIONS, shape=(n, r, NUM_ACTIONS), dtype=torch.bool, device=device),
+            "action_mask": Binary(
+                n=NUM_ACTIONS, shape=(n, r, NUM_ACTIONS), dtype=torch.bool, device=device
+            ),
             "info": Composite(
                 {
                     key: (
@@ -141,14 +145,23 @@ class BatchedCoverageEnv(EnvBase):
         self.action_spec = Composite(
             {
                 GROUP: Composite(
-                    {"action": Categorical(NUM_ACTIONS, shape=(n, r), dtype=torch.int64, device=device)},
+                    {
+                        "action": Categorical(
+                            NUM_ACTIONS, shape=(n, r), dtype=torch.int64, device=device
+                        )
+                    },
                     shape=(n, r),
                 )
             },
             shape=(n,),
         )
         self.reward_spec = Composite(
-            {GROUP: Composite({"reward": Unbounded(shape=(n, r, 1), dtype=torch.float32, device=device)}, shape=(n, r))},
+            {
+                GROUP: Composite(
+                    {"reward": Unbounded(shape=(n, r, 1), dtype=torch.float32, device=device)},
+                    shape=(n, r),
+                )
+            },
             shape=(n,),
         )
         self.done_spec = Composite(
@@ -165,7 +178,7 @@ class BatchedCoverageEnv(EnvBase):
         self._pending_seeds = [base + i for i in range(self.num_envs)]
 
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs: Any) -> TensorDictBase:
-        if tensordict is not None and "_reset" in tensordict.keys():
+        if tensordict is not None and "_reset" in tensordict:
             rows = tensordict.get("_reset").reshape(self.num_envs).cpu().numpy().nonzero()[0]
         else:
             rows = np.arange(self.num_envs)
@@ -238,7 +251,7 @@ class BatchedCoverageEnv(EnvBase):
             for key, last in self._last.items():
                 array = last.copy()
                 for i, row in rows.items():
-                    array[i] = row[key] if key in row else 0
+                    array[i] = row.get(key, 0)
                 out[key] = array
         if reset:  # the infos of a fresh episode are zeros
             for key, dtype in INFO_KEYS.items():

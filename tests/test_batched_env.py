@@ -89,7 +89,7 @@ def test_check_env_specs_and_collector() -> None:
     assert len(batches) == 2
     lean = BatchedCoverageEnv(2, observe_robots=False, **CONFIG)
     check_env_specs(lean)
-    assert "observation" not in lean.reset()["robot"].keys()
+    assert "observation" not in lean.reset()["robot"]
 
 
 def test_rollout_is_seeded() -> None:
