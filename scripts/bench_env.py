@@ -1,11 +1,17 @@
 """Environment throughput: env steps/s and agent-steps/s with every robot's observation built.
 
-Cases: (a) 4 robots on windows of the paper's map, K = 19; (b) 100 robots on the paper's
-5659-waypoint map, K = 19; (c) the default procedural city. Random valid actions; resets
-(new windows and cities) are included in the timing. Prints a table and writes JSON.
+PettingZoo cases: (a) 4 robots on windows of the paper's map, K = 19; (b) 100 robots on the
+paper's 5659-waypoint map, K = 19; (c) the default procedural city. Random valid actions; resets
+(new windows and cities) are included in the timing.
 
-    python scripts/bench_env.py [--seconds 5] [--backend auto|numpy|numba]
-                                [--out outputs/bench_env.json]
+TorchRL collection (case a's task, every robot's ego-graph and the state in every frame, random
+actions from the action spec, a TorchRL ``Collector``): (d) the batched environment
+(:class:`agents.batched_env.BatchedCoverageEnv`, ``--num-envs`` episodes per step) beside
+(e) TorchRL's ``PettingZooWrapper`` around the PettingZoo env; frames are env steps, and the
+ratio d / e is measured in the same run. Prints a table and writes JSON.
+
+    python scripts/bench_env.py [--seconds 5] [--backend auto|numpy|numba] [--num-envs 16]
+                                [--skip-collectors] [--out outputs/bench_env.json]
 """
 
 from __future__ import annotations
@@ -28,7 +34,8 @@ CASES = {
     "b: paper 5659 map, 100 robots, K=19": {"map": "paper_large", "num_robots": 100, "hops": 19},
     "c: procedural city (defaults)": {},
 }
-TARGETS = {"a": 5000.0, "b": 100.0}
+TARGETS = {"a": 5000.0, "b": 100.0, "d": 2000.0}
+COLLECTION = {"map": "paper", "num_robots": 4, "hops": 19}
 
 
 def observation_bytes(observations: dict) -> int:
@@ -68,6 +75,52 @@ def bench(config: dict, seconds: float) -> dict:
     }
 
 
+def bench_collector(env, frames_per_batch: int, seconds: float) -> dict:  # noqa: ANN001
+    """Frames (env steps) per second of a TorchRL ``Collector`` with random actions; the first
+    batch (warm-up) is not timed."""
+    import torch
+    from torchrl.collectors import Collector
+
+    torch.manual_seed(0)
+    env.set_seed(0)
+    collector = Collector(
+        env, None, frames_per_batch=frames_per_batch, total_frames=-1, return_same_td=True
+    )
+    frames, start = 0, None
+    for batch in collector:
+        if start is None:
+            start = time.perf_counter()
+            continue
+        frames += batch.numel()
+        if time.perf_counter() - start >= seconds:
+            break
+    elapsed = time.perf_counter() - start
+    collector.shutdown()
+    return {"frames_per_s": frames / elapsed, "frames": frames, "seconds": elapsed}
+
+
+def collection_cases(seconds: float, num_envs: int, backend: str) -> dict:
+    import torch
+    from torchrl.envs.libs.pettingzoo import PettingZooWrapper
+
+    from agents.batched_env import BatchedCoverageEnv
+
+    torch.set_num_threads(1)
+    config = {**COLLECTION, "ego_backend": backend}
+    batched = BatchedCoverageEnv(num_envs, **config)
+    wrapped = PettingZooWrapper(parallel_env(**config), return_state=True, use_mask=True)
+    return {
+        f"d: batched TorchRL env x{num_envs}, collector": {
+            "config": {**config, "num_envs": num_envs},
+            **bench_collector(batched, num_envs * 50, seconds),
+        },
+        "e: PettingZooWrapper, collector": {
+            "config": config,
+            **bench_collector(wrapped, 100, seconds),
+        },
+    }
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=5.0)
@@ -78,6 +131,8 @@ def main() -> None:
         choices=["auto", "numpy", "numba"],
         help="ego-graph builder (see CoverageConfig.ego_backend)",
     )
+    parser.add_argument("--num-envs", type=int, default=16, help="batched env size (case d)")
+    parser.add_argument("--skip-collectors", action="store_true", help="PettingZoo cases only")
     args = parser.parse_args()
     results = {}
     print(
@@ -98,6 +153,25 @@ def main() -> None:
             f"{(f'>= {target:.0f}' if target else '-'):>8}",
             flush=True,
         )
+    if not args.skip_collectors:
+        try:
+            collected = collection_cases(args.seconds, args.num_envs, args.backend)
+        except FileNotFoundError as error:
+            collected = {}
+            print(f"{'d, e: TorchRL collection':<38} skipped: {error}")
+        for name, result in collected.items():
+            results[name] = result
+            target = TARGETS.get(name[0])
+            print(
+                f"{name:<38} {result['frames_per_s']:12.0f} "
+                f"{result['frames_per_s'] * COLLECTION['num_robots']:14.0f} {'':>12} {'':>13} "
+                f"{(f'>= {target:.0f}' if target else '-'):>8}",
+                flush=True,
+            )
+        if len(collected) == 2:
+            d, e = (r["frames_per_s"] for r in collected.values())
+            results["ratio d / e"] = d / e
+            print(f"{'ratio d / e (target >= 10)':<38} {d / e:12.1f}")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(results, indent=2))
     print(f"wrote {args.out}")

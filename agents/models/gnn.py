@@ -240,16 +240,24 @@ class AggregationGNN(nn.Module):
         return self.readout(torch.cat(stages, dim=1)).squeeze(1)
 
 
-def flatten_padded(batch: dict[str, torch.Tensor]) -> tuple[torch.Tensor, ...]:
+def flatten_padded(
+    batch: dict[str, torch.Tensor], num_heads: int = NUM_ACTIONS
+) -> tuple[torch.Tensor, ...]:
     """A batch of padded graphs ``(B, M, ...)`` as one flat graph without padded edges.
 
     With a ``node_mask`` (real nodes are a prefix of each graph), node padding beyond the
     largest graph of the batch is cut off too: real edges never touch it, so the outputs are
     unchanged and a large padded shape costs nothing.
 
+    Args:
+        batch: Padded graph arrays with a leading batch axis.
+        num_heads: Leading edges of each graph whose flat ids are returned (the five action
+            edges of an ego-graph; ``5 R`` for a state's robots).
+
     Returns:
         ``nodes (B*M', F)`` with ``M' <= M``, ``edge_index (2, E')``, ``edge_attr (E', 1)``,
-        and the flat edge id of each graph's first five edges, ``(B, 5)`` (``-1`` where padded).
+        and the flat edge id of each graph's first ``num_heads`` edges, ``(B, num_heads)``
+        (``-1`` where padded).
     """
     nodes, edge_index = batch["nodes"], batch["edge_index"]
     if "node_mask" in batch and nodes.shape[1] > 0:
@@ -263,7 +271,7 @@ def flatten_padded(batch: dict[str, torch.Tensor]) -> tuple[torch.Tensor, ...]:
     flat_attr = batch["edge_attr"].reshape(-1, batch["edge_attr"].shape[-1])[keep]
     new_id = torch.cumsum(keep.long(), 0) - 1
     heads = (torch.arange(num_graphs, device=nodes.device) * num_edges).view(-1, 1)
-    heads = heads + torch.arange(NUM_ACTIONS, device=nodes.device)
+    heads = heads + torch.arange(num_heads, device=nodes.device)
     action_edges = torch.where(keep[heads], new_id[heads], torch.full_like(heads, -1))
     return nodes.reshape(-1, nodes.shape[-1]), flat_index, flat_attr, action_edges
 
@@ -286,11 +294,15 @@ def decentralized_logits(model: AggregationGNN, batch: dict[str, torch.Tensor]) 
 
 def centralized_logits(model: AggregationGNN, state: dict[str, torch.Tensor]) -> torch.Tensor:
     """Action logits ``(R, 5)`` of every robot from one pass over ``state()``."""
-    num_robots = state["robot_nodes"].shape[-1]
     batch = {k: v.unsqueeze(0) for k, v in state.items() if k != "robot_nodes"}
-    nodes, edge_index, edge_attr, _ = flatten_padded(batch)
-    keep = state["edge_mask"].bool()
-    new_id = torch.cumsum(keep.long(), 0) - 1
-    heads = torch.arange(NUM_ACTIONS * num_robots, device=keep.device).view(num_robots, -1)
-    action_edges = torch.where(keep[heads], new_id[heads], torch.full_like(heads, -1))
-    return action_logits(model, (nodes, edge_index, edge_attr), action_edges)
+    return batched_state_logits(model, batch, state["robot_nodes"].shape[-1])[0]
+
+
+def batched_state_logits(
+    model: AggregationGNN, batch: dict[str, torch.Tensor], num_robots: int
+) -> torch.Tensor:
+    """Action logits ``(B, R, 5)`` of every robot of a batch of padded states ``(B, M, ...)``,
+    one pass over all of them (``-inf`` where an action has no edge)."""
+    nodes, edge_index, edge_attr, heads = flatten_padded(batch, NUM_ACTIONS * num_robots)
+    logits = action_logits(model, (nodes, edge_index, edge_attr), heads.view(-1, NUM_ACTIONS))
+    return logits.view(heads.shape[0], num_robots, NUM_ACTIONS)

@@ -23,7 +23,13 @@ import torch
 from torch import nn
 
 from agents.cli import write_bytes_atomic
-from agents.models.gnn import AggregationGNN, GNNConfig, centralized_logits, decentralized_logits
+from agents.models.gnn import (
+    AggregationGNN,
+    GNNConfig,
+    batched_state_logits,
+    centralized_logits,
+    decentralized_logits,
+)
 from marl_cover.ego import NUM_ACTIONS
 
 #: Keys of a padded graph observation read by the policy.
@@ -50,16 +56,61 @@ class EgoGraphLogits(nn.Module):
         action_mask: torch.Tensor,
     ) -> tuple[torch.Tensor, torch.Tensor]:
         lead = nodes.shape[:-2]
-        batch = {
-            "nodes": nodes.reshape(-1, *nodes.shape[-2:]),
-            "edge_index": edge_index.reshape(-1, *edge_index.shape[-2:]),
-            "edge_attr": edge_attr.reshape(-1, *edge_attr.shape[-2:]),
-            "edge_mask": edge_mask.reshape(-1, edge_mask.shape[-1]),
-        }
+        batch = flat_batch(nodes, edge_index, edge_attr, edge_mask)
         logits = decentralized_logits(self.gnn, batch)  # (B, 5), -inf where no action edge
         mask = action_mask.reshape(-1, NUM_ACTIONS).bool() & torch.isfinite(logits)
         logits = logits.masked_fill(~mask, 0.0)
         return logits.view(*lead, NUM_ACTIONS), mask.view(*lead, NUM_ACTIONS)
+
+
+class StateLogits(nn.Module):
+    """Action logits ``(..., R, 5)`` and mask of every robot from padded states ``(..., M, *)``.
+
+    One pass over each state gives every robot's logits: the same numbers as
+    :class:`EgoGraphLogits` on the robots' ego-graphs (the ego-graph holds the network's whole
+    receptive field), for about ``1 / R`` of the work; training loops use it.
+    """
+
+    def __init__(self, gnn: AggregationGNN, num_robots: int) -> None:
+        super().__init__()
+        self.gnn = gnn
+        self.num_robots = num_robots
+
+    def forward(
+        self,
+        nodes: torch.Tensor,
+        edge_index: torch.Tensor,
+        edge_attr: torch.Tensor,
+        edge_mask: torch.Tensor,
+        node_mask: torch.Tensor,
+        action_mask: torch.Tensor,
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        lead, r = nodes.shape[:-2], self.num_robots
+        batch = flat_batch(nodes, edge_index, edge_attr, edge_mask, node_mask)
+        logits = batched_state_logits(self.gnn, batch, r)  # (B, R, 5)
+        mask = action_mask.reshape(-1, r, NUM_ACTIONS).bool() & torch.isfinite(logits)
+        logits = logits.masked_fill(~mask, 0.0)
+        return logits.view(*lead, r, NUM_ACTIONS), mask.view(*lead, r, NUM_ACTIONS)
+
+
+def flat_batch(
+    nodes: torch.Tensor,
+    edge_index: torch.Tensor,
+    edge_attr: torch.Tensor,
+    edge_mask: torch.Tensor,
+    node_mask: torch.Tensor | None = None,
+) -> dict[str, torch.Tensor]:
+    """Padded graph arrays with any leading shape as one batch axis (the input of
+    :func:`~agents.models.gnn.flatten_padded`)."""
+    batch = {
+        "nodes": nodes.reshape(-1, *nodes.shape[-2:]),
+        "edge_index": edge_index.reshape(-1, *edge_index.shape[-2:]),
+        "edge_attr": edge_attr.reshape(-1, *edge_attr.shape[-2:]),
+        "edge_mask": edge_mask.reshape(-1, edge_mask.shape[-1]),
+    }
+    if node_mask is not None:
+        batch["node_mask"] = node_mask.reshape(-1, node_mask.shape[-1])
+    return batch
 
 
 def make_actor(
@@ -79,18 +130,37 @@ def make_actor(
         mask_key: Where the action mask is read (default: ``action_mask`` inside the
             observation; TorchRL's ``PettingZooWrapper`` lifts it to ``(group, "action_mask")``).
     """
+    prefix = observation_key if isinstance(observation_key, tuple) else (observation_key,)
+    in_keys = [(*prefix, key) for key in GRAPH_KEYS[:-1]]
+    in_keys.append(mask_key if mask_key is not None else (*prefix, "action_mask"))
+    return _masked_actor(EgoGraphLogits(gnn), in_keys, action_key)
+
+
+def make_state_actor(
+    gnn: AggregationGNN,
+    num_robots: int,
+    state_key: Any = "state",
+    action_key: Any = ("robot", "action"),
+    mask_key: Any = ("robot", "action_mask"),
+) -> Any:
+    """A ``ProbabilisticActor`` of every robot at once over :class:`StateLogits` (the keys of
+    :class:`agents.batched_env.BatchedCoverageEnv` by default)."""
+    prefix = state_key if isinstance(state_key, tuple) else (state_key,)
+    in_keys = [(*prefix, key) for key in (*GRAPH_KEYS[:-1], "node_mask")]
+    return _masked_actor(StateLogits(gnn, num_robots), [*in_keys, mask_key], action_key)
+
+
+def _masked_actor(logits_module: nn.Module, in_keys: list[Any], action_key: Any) -> Any:
+    """A ``ProbabilisticActor`` with a ``MaskedCategorical`` over a module returning
+    ``(logits, mask)``; logits, mask and log-probability are written beside ``action_key``."""
     from tensordict.nn import TensorDictModule
     from torchrl.modules import MaskedCategorical, ProbabilisticActor
 
     def beside(name: str) -> Any:
         return (*action_key[:-1], name) if isinstance(action_key, tuple) else name
 
-    prefix = observation_key if isinstance(observation_key, tuple) else (observation_key,)
     module = TensorDictModule(
-        EgoGraphLogits(gnn),
-        in_keys=[(*prefix, key) for key in GRAPH_KEYS[:-1]]
-        + [mask_key if mask_key is not None else (*prefix, "action_mask")],
-        out_keys=[beside("logits"), beside("mask")],
+        logits_module, in_keys=in_keys, out_keys=[beside("logits"), beside("mask")]
     )
     return ProbabilisticActor(
         module,

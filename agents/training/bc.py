@@ -44,6 +44,7 @@ from agents.evaluation import evaluate
 from agents.models.gnn import AggregationGNN, GNNConfig, action_logits
 from agents.models.policy import GNNPolicy, load_model, save_model
 from agents.training.data import GraphTable, collate_states, episode_transitions
+from agents.training.runs import check_same_run, make_logger
 from marl_cover.env import CoverageEnv
 
 logger = logging.getLogger(__name__)
@@ -231,18 +232,6 @@ def dagger_round(
 
 
 # ---------------------------------------------------------------------------- checkpoints
-def _make_logger(config: BCConfig, out: Path) -> Any:
-    if config.logger == "none":
-        return None
-    if config.logger == "tensorboard":
-        from torchrl.record.loggers import TensorboardLogger
-
-        return TensorboardLogger(exp_name="log", log_dir=str(out))
-    from torchrl.record.loggers import CSVLogger
-
-    return CSVLogger(exp_name="log", log_dir=str(out))
-
-
 def _phase(step: int, config: BCConfig) -> tuple[int, int]:
     """(phase, step within the phase): phase 0 is BC, phase k the training after round k."""
     if step < config.steps or config.dagger.rounds == 0:
@@ -267,18 +256,7 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
     out.mkdir(parents=True, exist_ok=True)
     record = configuration.as_dict(config)
     config_path = out / "config.yaml"
-    if config_path.exists():
-        previous = yaml.safe_load(config_path.read_text())
-        changed = sorted(
-            k
-            for k in set(previous) | set(record)
-            if k not in ("progress", "steps") and previous.get(k) != record.get(k)
-        )
-        if changed:
-            raise ValueError(
-                f"{out} holds a run with other settings ({changed}); use another out= or "
-                "delete the folder"
-            )
+    check_same_run(config_path, record, ignored=("progress", "steps"))
     write_text_atomic(config_path, yaml.safe_dump(record, sort_keys=False))
 
     # seeding: torch (initialisation, sampling order) and numpy (split) from one seed
@@ -324,7 +302,7 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
         torch.set_rng_state(state["torch_rng"])
         step, best_reward = state["step"], state["best_reward"]
         logger.info("resumed %s at step %d", out, step)
-    log = _make_logger(config, out)
+    log = make_logger(config.logger, out)
     metadata = {
         "dataset": config.dataset,
         "train_episodes": len(train),

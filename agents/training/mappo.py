@@ -1,0 +1,461 @@
+"""MAPPO (and IPPO) for the coverage task with TorchRL: a shared GNN actor, a GNN critic.
+
+The loop (TorchRL's multi-agent PPO recipe, ``sota-implementations/multiagent/mappo_ippo.py``):
+
+1. A TorchRL collector steps :class:`~agents.batched_env.BatchedCoverageEnv` (``num_envs``
+   episodes together; ``workers > 1`` runs that many in worker processes) with the actor, and
+   returns ``frames_per_batch`` env steps per iteration.
+2. The team reward is scaled by ``reward_scale``; the episode ends are copied onto every robot;
+   TorchRL's GAE gives each robot's advantage and value target from the critic.
+3. ``epochs`` passes of ``ClipPPOLoss`` over the batch in minibatches (sampled without
+   replacement from a TorchRL replay buffer), Adam, gradient clipping.
+4. Every ``eval.every`` iterations: the argmax policy on the evaluation seeds through the
+   harness, a resumable checkpoint, and ``best.pt`` when the evaluation reward improves.
+
+Actor: the shared aggregation GNN with a masked categorical over each robot's five action
+slots. ``model.actor_input="state"`` (default) runs it once per whole-graph state for all
+robots, which gives the same logits as running it on each robot's ego-graph (tested) for
+about a quarter of the work; ``"ego"`` runs it on the ego-graphs the robots observe. Critic
+(``algorithm``): ``"mappo"`` a GNN on ``state`` giving each robot's value (``value_aggregate=
+"sum"``: the paper's sum over robots); ``"ippo"`` a GNN on each robot's own ego-graph.
+
+Fine-tuning: ``init`` loads a behaviour-cloned model as the actor (its GNN config replaces
+``model.actor``); ``optim.critic_warmup_iters`` trains only the critic for the first iterations,
+so that an untrained critic does not push the cloned policy around.
+
+Outputs in ``out``: ``config.yaml``, ``checkpoint.pt`` (resumable: re-run with the same ``out``),
+``best.pt`` and ``model.pt`` (actor model files that ``scripts/evaluate.py checkpoint=...``
+reads), ``log/`` (TorchRL CSV or TensorBoard logger), ``curve.json`` and ``summary.json``.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from agents import configuration
+from agents.cli import write_text_atomic
+from agents.evaluation import evaluate
+from agents.models.gnn import AggregationGNN, GNNConfig
+from agents.models.policy import GNNPolicy, load_model, make_actor, make_state_actor, save_model
+from agents.models.value import AGGREGATES, EgoValue, StateValue
+from agents.training.runs import LOGGERS, check_same_run, make_logger
+from marl_cover.env import CoverageEnv
+
+logger = logging.getLogger(__name__)
+
+GROUP = "robot"
+ALGORITHMS = ("mappo", "ippo")
+GRAPH_IN = ("nodes", "edge_index", "edge_attr", "edge_mask", "node_mask")
+
+
+@dataclass
+class CollectorConfig:
+    """Data collection.
+
+    Attributes:
+        n_iters: Training iterations (one batch each).
+        frames_per_batch: Env steps per batch (each holds ``num_robots`` observations).
+        num_envs: Episodes stepped together per worker.
+        workers: Collector processes (1: in the training process).
+    """
+
+    n_iters: int = 250
+    frames_per_batch: int = 1000
+    num_envs: int = 20
+    workers: int = 1
+
+
+@dataclass
+class LossConfig:
+    """``ClipPPOLoss`` and GAE settings."""
+
+    gamma: float = 0.99
+    lmbda: float = 0.95
+    clip_epsilon: float = 0.2
+    entropy_coef: float = 0.01
+    critic_coef: float = 0.5
+    normalize_advantage: bool = True
+    reward_scale: float = 0.1
+
+
+@dataclass
+class OptimConfig:
+    """Optimiser settings.
+
+    Attributes:
+        lr: Adam learning rate (actor and critic).
+        lr_anneal: Decay the learning rate linearly to 0 over ``n_iters``.
+        epochs: Passes over each batch.
+        minibatch_size: Env steps per minibatch.
+        max_grad_norm: Gradient clipping.
+        critic_warmup_iters: First iterations that train the critic only.
+    """
+
+    lr: float = 3e-4
+    lr_anneal: bool = False
+    epochs: int = 4
+    minibatch_size: int = 250
+    max_grad_norm: float = 0.5
+    critic_warmup_iters: int = 0
+
+
+@dataclass
+class ModelConfig:
+    """Actor and critic networks."""
+
+    actor: GNNConfig = field(default_factory=lambda: GNNConfig(kind="linear", hops=19))
+    critic: GNNConfig = field(default_factory=lambda: GNNConfig(kind="linear", hops=19))
+    actor_input: str = "state"
+    value_aggregate: str = "robot"
+
+
+@dataclass
+class EvalConfig:
+    """Evaluation of the argmax policy during training (seeds disjoint from the test seeds)."""
+
+    every: int = 10
+    episodes: int = 20
+    seed: int = 10_000
+
+
+@dataclass
+class MAPPOConfig:
+    """A MAPPO/IPPO run (see the module docstring)."""
+
+    out: str = "outputs/mappo/run"
+    env: dict[str, Any] = field(default_factory=lambda: {"map": "paper", "hops": 19})
+    algorithm: str = "mappo"
+    init: str | None = None
+    collector: CollectorConfig = field(default_factory=CollectorConfig)
+    loss: LossConfig = field(default_factory=LossConfig)
+    optim: OptimConfig = field(default_factory=OptimConfig)
+    model: ModelConfig = field(default_factory=ModelConfig)
+    eval: EvalConfig = field(default_factory=EvalConfig)
+    seed: int = 0
+    device: str = "cpu"
+    threads: int = 1
+    logger: str | None = "csv"
+    progress: bool = True
+
+    def __post_init__(self) -> None:
+        if self.algorithm not in ALGORITHMS:
+            raise ValueError(f"algorithm must be one of {ALGORITHMS}, got {self.algorithm!r}")
+        if self.model.actor_input not in ("state", "ego"):
+            raise ValueError(
+                f"model.actor_input must be state or ego, got {self.model.actor_input!r}"
+            )
+        if self.model.value_aggregate not in AGGREGATES:
+            raise ValueError(f"model.value_aggregate must be one of {AGGREGATES}")
+        if self.logger is None:  # ``logger=none`` on the command line
+            self.logger = "none"
+        if self.logger not in LOGGERS:
+            raise ValueError(f"logger must be one of {LOGGERS}, got {self.logger!r}")
+        c = self.collector
+        if min(c.n_iters, c.frames_per_batch, c.num_envs, c.workers) < 1:
+            raise ValueError("collector.n_iters, frames_per_batch, num_envs, workers must be >= 1")
+        if c.frames_per_batch % (c.num_envs * c.workers):
+            raise ValueError(
+                f"collector.frames_per_batch ({c.frames_per_batch}) must be a multiple of "
+                f"num_envs * workers ({c.num_envs * c.workers})"
+            )
+        if self.optim.minibatch_size < 1 or self.optim.epochs < 1:
+            raise ValueError("optim.minibatch_size and optim.epochs must be >= 1")
+
+    @property
+    def needs_ego(self) -> bool:
+        """Whether the environment must build the robots' ego-graphs."""
+        return self.model.actor_input == "ego" or self.algorithm == "ippo"
+
+
+# ---------------------------------------------------------------------------- modules
+def make_env(config: MAPPOConfig) -> Any:
+    """The batched TorchRL environment of a run."""
+    from agents.batched_env import BatchedCoverageEnv
+
+    return BatchedCoverageEnv(
+        config.collector.num_envs, observe_robots=config.needs_ego, **config.env
+    )
+
+
+def build_actor(gnn: AggregationGNN, config: MAPPOConfig, num_robots: int) -> Any:
+    """The ``ProbabilisticActor`` on the batched environment's keys."""
+    if config.model.actor_input == "state":
+        return make_state_actor(gnn, num_robots)
+    return make_actor(
+        gnn,
+        observation_key=(GROUP, "observation"),
+        action_key=(GROUP, "action"),
+        mask_key=(GROUP, "action_mask"),
+    )
+
+
+def build_critic(gnn: AggregationGNN, config: MAPPOConfig, num_robots: int) -> Any:
+    """The value module writing ``(robot, state_value)``."""
+    from tensordict.nn import TensorDictModule
+
+    if config.algorithm == "ippo":
+        return TensorDictModule(
+            EgoValue(gnn),
+            in_keys=[(GROUP, "observation", k) for k in GRAPH_IN],
+            out_keys=[(GROUP, "state_value")],
+        )
+    return TensorDictModule(
+        StateValue(gnn, num_robots, config.model.value_aggregate),
+        in_keys=[("state", k) for k in GRAPH_IN],
+        out_keys=[(GROUP, "state_value")],
+    )
+
+
+def build_loss(actor: Any, critic: Any, config: MAPPOConfig) -> Any:
+    """``ClipPPOLoss`` with a GAE estimator on the group's keys."""
+    from torchrl.objectives import ClipPPOLoss, ValueEstimators
+
+    loss = ClipPPOLoss(
+        actor_network=actor,
+        critic_network=critic,
+        clip_epsilon=config.loss.clip_epsilon,
+        entropy_coeff=config.loss.entropy_coef,
+        critic_coeff=config.loss.critic_coef,
+        normalize_advantage=config.loss.normalize_advantage,
+        normalize_advantage_exclude_dims=(-2,),  # per robot
+    )
+    loss.set_keys(
+        reward=(GROUP, "reward"),
+        action=(GROUP, "action"),
+        sample_log_prob=(GROUP, "sample_log_prob"),
+        value=(GROUP, "state_value"),
+        done=(GROUP, "done"),
+        terminated=(GROUP, "terminated"),
+    )
+    loss.make_value_estimator(  # the critic reads data-dependent sizes: no vmap
+        ValueEstimators.GAE, gamma=config.loss.gamma, lmbda=config.loss.lmbda, deactivate_vmap=True
+    )
+    return loss
+
+
+def prepare_batch(data: Any, reward_scale: float) -> Any:
+    """Scales the team reward and copies the episode ends onto every robot (GAE reads them
+    beside the per-robot rewards), in place."""
+    shape = data.get(("next", GROUP, "reward")).shape  # (..., R, 1)
+    for key in ("done", "terminated"):
+        data.set(("next", GROUP, key), data.get(("next", key)).unsqueeze(-2).expand(shape))
+    data.set(("next", GROUP, "reward"), data.get(("next", GROUP, "reward")) * reward_scale)
+    return data
+
+
+def episode_rewards(data: Any) -> list[float]:
+    """Team rewards of the episodes that ended in a batch (the robots' credits at the end)."""
+    done = data.get(("next", "done")).squeeze(-1)
+    totals = data.get(("next", GROUP, "info", "total_interest")).sum(-1)
+    return totals[done].float().tolist()
+
+
+# ---------------------------------------------------------------------------- the loop
+def train_mappo(config: MAPPOConfig) -> dict[str, Any]:
+    """Trains (or resumes) a MAPPO/IPPO run; returns its summary (see the module docstring)."""
+    import yaml
+    from torchrl.data import LazyTensorStorage, ReplayBuffer
+    from torchrl.data.replay_buffers import SamplerWithoutReplacement
+
+    out = Path(config.out)
+    out.mkdir(parents=True, exist_ok=True)
+    record = configuration.as_dict(config)
+    check_same_run(out / "config.yaml", record, ignored=("progress", "collector"))
+    write_text_atomic(out / "config.yaml", yaml.safe_dump(record, sort_keys=False))
+    torch.manual_seed(config.seed)
+    torch.set_num_threads(config.threads)
+    device = torch.device(config.device)
+
+    eval_env = CoverageEnv(**config.env)
+    num_robots = eval_env.config.num_robots
+    actor_gnn = AggregationGNN(config.model.actor)
+    metadata: dict[str, Any] = {"algorithm": config.algorithm, "seed": config.seed}
+    if config.init is not None:
+        actor_gnn, init_meta = load_model(config.init)
+        metadata["init"] = {"path": config.init, **init_meta}
+    critic_gnn = AggregationGNN(config.model.critic)
+    actor_gnn.to(device).train()
+    critic_gnn.to(device).train()
+    actor = build_actor(actor_gnn, config, num_robots)
+    critic = build_critic(critic_gnn, config, num_robots)
+    loss_module = build_loss(actor, critic, config)
+    optimizer = torch.optim.Adam(loss_module.parameters(), lr=config.optim.lr)
+
+    iteration, best_reward, curve = 0, -math.inf, []
+    checkpoint_path = out / "checkpoint.pt"
+    if checkpoint_path.exists():
+        state = torch.load(checkpoint_path, map_location=device, weights_only=False)
+        actor_gnn.load_state_dict(state["state_dict"])
+        critic_gnn.load_state_dict(state["critic"])
+        optimizer.load_state_dict(state["optimizer"])
+        torch.set_rng_state(state["torch_rng"])
+        iteration, best_reward, curve = state["iteration"], state["best_reward"], state["curve"]
+        logger.info("resumed %s at iteration %d", out, iteration)
+
+    c = config.collector
+    collector = None
+    if iteration < c.n_iters:
+        collector = _make_collector(config, actor, device, c.n_iters - iteration)
+        collector.set_seed(config.seed + 100_003 * iteration)
+    buffer = ReplayBuffer(
+        storage=LazyTensorStorage(c.frames_per_batch, device=device),
+        sampler=SamplerWithoutReplacement(),
+        batch_size=config.optim.minibatch_size,
+    )
+    log = make_logger(config.logger, out)
+    progress = None
+    if config.progress:
+        from tqdm import tqdm
+
+        progress = tqdm(total=c.n_iters, initial=iteration, unit="iter", desc=config.algorithm)
+    start_time = time.perf_counter()
+    metrics: dict[str, float] = {}
+    for data in collector if collector is not None else []:
+        collect_seconds = time.perf_counter() - start_time
+        rewards = episode_rewards(data)
+        # a shallow copy: the collector reuses its buffer, and the keys added here must not stay
+        data = prepare_batch(data.copy().to(device), config.loss.reward_scale)
+        with torch.no_grad():
+            loss_module.value_estimator(
+                data,
+                params=loss_module.critic_network_params,
+                target_params=loss_module.target_critic_network_params,
+            )
+        buffer.empty()
+        buffer.extend(data.reshape(-1))
+        if config.optim.lr_anneal:
+            for group in optimizer.param_groups:
+                group["lr"] = config.optim.lr * (1 - iteration / c.n_iters)
+        actor_frozen = iteration < config.optim.critic_warmup_iters
+        metrics = _update(loss_module, optimizer, buffer, config, actor_frozen)
+        collector.update_policy_weights_()
+        iteration += 1
+        frames = iteration * c.frames_per_batch
+        metrics.update(
+            {
+                "episode_reward": float(np.mean(rewards)) if rewards else math.nan,
+                "episodes": float(len(rewards)),
+                "frames": float(frames),
+                "observations": float(frames * num_robots),
+                "collect_seconds": collect_seconds,
+                "train_seconds": time.perf_counter() - start_time - collect_seconds,
+            }
+        )
+        if iteration % config.eval.every == 0 or iteration == c.n_iters:
+            seeds = range(config.eval.seed, config.eval.seed + config.eval.episodes)
+            metrics["eval_reward"] = evaluate(eval_env, _eval_policy(actor_gnn), seeds).mean
+            actor_gnn.train()
+            if metrics["eval_reward"] > best_reward:
+                best_reward = metrics["eval_reward"]
+                save_model(out / "best.pt", _cpu(actor_gnn), {**metadata, "iteration": iteration})
+        curve.append({"iteration": iteration, **metrics})
+        if log is not None:
+            for key, value in metrics.items():
+                if not math.isnan(value):
+                    log.log_scalar(key, value, step=frames)
+        if progress is not None:
+            progress.update()
+            progress.set_postfix(
+                reward=f"{metrics['episode_reward']:.1f}",
+                eval=f"{metrics.get('eval_reward', math.nan):.1f}",
+            )
+        if "eval_reward" in metrics or iteration == c.n_iters:
+            save_model(
+                checkpoint_path,
+                _cpu(actor_gnn),
+                {**metadata, "iteration": iteration},
+                critic=critic_gnn.state_dict(),
+                critic_config=asdict(critic_gnn.config),
+                optimizer=optimizer.state_dict(),
+                torch_rng=torch.get_rng_state(),
+                iteration=iteration,
+                best_reward=best_reward,
+                curve=curve,
+                config=record,
+            )
+            write_text_atomic(out / "curve.json", json.dumps(curve, indent=1))
+        start_time = time.perf_counter()
+    if collector is not None:
+        collector.shutdown()
+    if progress is not None:
+        progress.close()
+    save_model(out / "model.pt", _cpu(actor_gnn), {**metadata, "iteration": iteration})
+    summary = {"iteration": iteration, "best_eval_reward": best_reward, **metadata, **metrics}
+    write_text_atomic(out / "summary.json", json.dumps(summary, indent=2, default=str))
+    return summary
+
+
+def _update(
+    loss_module: Any, optimizer: Any, buffer: Any, config: MAPPOConfig, actor_frozen: bool
+) -> dict[str, float]:
+    """``epochs`` passes of PPO over the buffer; mean losses of the last pass."""
+    steps = max(1, len(buffer) // config.optim.minibatch_size)
+    totals: dict[str, float] = {}
+    for _ in range(config.optim.epochs):
+        totals = {}
+        for _ in range(steps):
+            losses = loss_module(buffer.sample())
+            if actor_frozen:
+                total = losses["loss_critic"]
+            else:
+                total = losses["loss_objective"] + losses["loss_critic"] + losses["loss_entropy"]
+            optimizer.zero_grad()
+            total.backward()
+            torch.nn.utils.clip_grad_norm_(loss_module.parameters(), config.optim.max_grad_norm)
+            optimizer.step()
+            for key in ("loss_objective", "loss_critic", "loss_entropy", "entropy", "kl_approx"):
+                if key in losses:
+                    totals[key] = totals.get(key, 0.0) + float(losses[key].detach()) / steps
+    return totals
+
+
+def _make_collector(config: MAPPOConfig, actor: Any, device: torch.device, n_iters: int) -> Any:
+    from torchrl.collectors import Collector, MultiSyncCollector
+
+    c = config.collector
+    total = max(n_iters, 0) * c.frames_per_batch
+    kwargs = {
+        "frames_per_batch": c.frames_per_batch,
+        "total_frames": total,
+        "env_device": "cpu",
+        "policy_device": device,
+        "storing_device": device,
+        "auto_register_policy_transforms": False,
+    }
+    if c.workers == 1:
+        return Collector(make_env(config), actor, return_same_td=True, **kwargs)
+    factories = [_EnvFactory(config)] * c.workers
+    return MultiSyncCollector(factories, actor, **kwargs)
+
+
+class _EnvFactory:
+    """A picklable ``create_env_fn`` for worker processes."""
+
+    def __init__(self, config: MAPPOConfig) -> None:
+        self.config = config
+
+    def __call__(self) -> Any:
+        torch.set_num_threads(1)
+        return make_env(self.config)
+
+
+def _eval_policy(gnn: AggregationGNN) -> GNNPolicy:
+    return GNNPolicy(_cpu(gnn), centralized=True)
+
+
+def _cpu(gnn: AggregationGNN) -> AggregationGNN:
+    """``gnn`` itself on the CPU, or a CPU copy of it."""
+    if next(gnn.parameters()).device.type == "cpu":
+        return gnn
+    copy = AggregationGNN(gnn.config)
+    copy.load_state_dict({k: v.cpu() for k, v in gnn.state_dict().items()})
+    return copy
