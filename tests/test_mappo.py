@@ -141,7 +141,7 @@ def test_ppo_updates_lower_the_critic_loss(rollout, tmp_path: Path) -> None:  # 
 def test_mappo_learns_a_tiny_task(tmp_path: Path) -> None:
     config = tiny_config(tmp_path, "collector.n_iters=20", "seed=0")
     summary = train_mappo(config)
-    curve = json.loads((tmp_path / "run" / "curve.json").read_text())
+    curve = json.loads((tmp_path / "run" / "curve.json").read_text())[1:]  # after iteration 0
     first = np.mean([row["episode_reward"] for row in curve[:4]])
     last = np.mean([row["episode_reward"] for row in curve[-4:]])
     assert summary["iteration"] == 20
@@ -163,6 +163,9 @@ def test_config_errors_name_the_key(tmp_path: Path) -> None:
         tiny_config(tmp_path, "collector.frames_per_batch=30")
     with pytest.raises(ValueError, match="unknown key"):
         tiny_config(tmp_path, "optim.learning_rate=1")
+    if not torch.cuda.is_available():
+        with pytest.raises(ValueError, match="no CUDA"):
+            train_mappo(tiny_config(tmp_path, "device=cuda"))
 
 
 def test_train_mappo_script_smoke_and_resume(tmp_path: Path) -> None:
@@ -191,6 +194,6 @@ def test_train_mappo_script_smoke_and_resume(tmp_path: Path) -> None:
     done = subprocess.run(command, capture_output=True, text=True, env=env, check=False)
     assert done.returncode == 0, done.stderr[-3000:]
     curve = json.loads((tmp_path / "smoke" / "curve.json").read_text())
-    assert [row["iteration"] for row in curve] == [1, 2, 3]
+    assert [row["iteration"] for row in curve] == [0, 1, 2, 3]  # 0: the untrained policy
     bad = subprocess.run([*command, "loss.gama=0.9"], capture_output=True, text=True, env=env)
     assert bad.returncode != 0 and "gama" in bad.stderr

@@ -141,7 +141,7 @@ class MAPPOConfig:
     model: ModelConfig = field(default_factory=ModelConfig)
     eval: EvalConfig = field(default_factory=EvalConfig)
     seed: int = 0
-    device: str = "cpu"
+    device: str = "cpu"  # "cpu", "cuda", "cuda:1", or "auto"
     threads: int = 1
     logger: str | None = "csv"
     progress: bool = True
@@ -177,6 +177,20 @@ class MAPPOConfig:
 
 
 # ---------------------------------------------------------------------------- modules
+def resolve_device(name: str) -> torch.device:
+    """``"auto"``: CUDA where available, else the CPU; any other name as ``torch.device``.
+
+    Raises:
+        ValueError: ``"cuda"`` asked for on a machine without a usable GPU.
+    """
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    device = torch.device(name)
+    if device.type == "cuda" and not torch.cuda.is_available():
+        raise ValueError(f"device={name} but torch sees no CUDA GPU here (use device=cpu or auto)")
+    return device
+
+
 def make_env(config: MAPPOConfig) -> Any:
     """The batched TorchRL environment of a run."""
     from agents.batched_env import BatchedCoverageEnv
@@ -266,6 +280,7 @@ def train_mappo(config: MAPPOConfig) -> dict[str, Any]:
     from torchrl.data import LazyTensorStorage, ReplayBuffer
     from torchrl.data.replay_buffers import SamplerWithoutReplacement
 
+    device = resolve_device(config.device)
     out = Path(config.out)
     out.mkdir(parents=True, exist_ok=True)
     record = configuration.as_dict(config)
@@ -273,7 +288,6 @@ def train_mappo(config: MAPPOConfig) -> dict[str, Any]:
     write_text_atomic(out / "config.yaml", yaml.safe_dump(record, sort_keys=False))
     torch.manual_seed(config.seed)
     torch.set_num_threads(config.threads)
-    device = torch.device(config.device)
 
     eval_env = CoverageEnv(**config.env)
     num_robots = eval_env.config.num_robots
@@ -317,6 +331,10 @@ def train_mappo(config: MAPPOConfig) -> dict[str, Any]:
         from tqdm import tqdm
 
         progress = tqdm(total=c.n_iters, initial=iteration, unit="iter", desc=config.algorithm)
+    if iteration == 0 and not curve:  # where training starts (the BC model when fine-tuning)
+        reward = evaluate(eval_env, _eval_policy(actor_gnn), _eval_seeds(config)).mean
+        actor_gnn.train()
+        curve.append({"iteration": 0, "frames": 0.0, "observations": 0.0, "eval_reward": reward})
     start_time = time.perf_counter()
     metrics: dict[str, float] = {}
     for data in collector if collector is not None else []:
@@ -351,7 +369,7 @@ def train_mappo(config: MAPPOConfig) -> dict[str, Any]:
             }
         )
         if iteration % config.eval.every == 0 or iteration == c.n_iters:
-            seeds = range(config.eval.seed, config.eval.seed + config.eval.episodes)
+            seeds = _eval_seeds(config)
             metrics["eval_reward"] = evaluate(eval_env, _eval_policy(actor_gnn), seeds).mean
             actor_gnn.train()
             if metrics["eval_reward"] > best_reward:
@@ -446,6 +464,10 @@ class _EnvFactory:
     def __call__(self) -> Any:
         torch.set_num_threads(1)
         return make_env(self.config)
+
+
+def _eval_seeds(config: MAPPOConfig) -> range:
+    return range(config.eval.seed, config.eval.seed + config.eval.episodes)
 
 
 def _eval_policy(gnn: AggregationGNN) -> GNNPolicy:
