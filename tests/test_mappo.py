@@ -197,3 +197,10 @@ def test_train_mappo_script_smoke_and_resume(tmp_path: Path) -> None:
     assert [row["iteration"] for row in curve] == [0, 1, 2, 3]  # 0: the untrained policy
     bad = subprocess.run([*command, "loss.gama=0.9"], capture_output=True, text=True, env=env)
     assert bad.returncode != 0 and "gama" in bad.stderr
+
+
+def test_worker_processes_collect_the_same_budget(tmp_path: Path) -> None:
+    config = tiny_config(tmp_path, "collector.workers=2", "collector.n_iters=2", "eval.every=2")
+    summary = train_mappo(config)
+    assert summary["frames"] == 800 and summary["episodes"] == 2 * 20  # 10-step episodes
+    assert np.isfinite(summary["eval_reward"])

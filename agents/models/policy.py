@@ -3,7 +3,9 @@
 - :class:`EgoGraphLogits` maps padded ego-graph observations (any leading batch shape, such as
   ``(robots,)`` or ``(envs, robots)``) to action logits and a boolean action mask;
   :func:`make_actor` wraps it as a TorchRL ``ProbabilisticActor`` with a ``MaskedCategorical``
-  (the module that behaviour cloning and MAPPO share).
+  (the module that behaviour cloning and MAPPO share). :class:`StateLogits` /
+  :func:`make_state_actor` give every robot's logits from one pass over each whole-graph state
+  (the same numbers, for the training loops).
 - :class:`GNNPolicy` plays in the evaluation harness: decentralized (each robot on its own
   ego-graph, :meth:`GNNPolicy.act`) or centralized (one pass on ``state()``,
   :meth:`GNNPolicy.act_state`), greedy (argmax) by default.
