@@ -117,9 +117,14 @@ def test_prepare_batch_and_episode_rewards(rollout) -> None:  # noqa: ANN001
 def test_ppo_updates_lower_the_critic_loss(rollout, tmp_path: Path) -> None:  # noqa: ANN001
     torch.manual_seed(3)
     config = tiny_config(tmp_path)
-    actor = build_actor(AggregationGNN(config.model.actor), config, 3)
-    critic = build_critic(AggregationGNN(config.model.critic), config, 3)
+    actor_gnn, critic_gnn = AggregationGNN(config.model.actor), AggregationGNN(config.model.critic)
+    actor = build_actor(actor_gnn, config, 3)
+    critic = build_critic(critic_gnn, config, 3)
     loss_module = build_loss(actor, critic, config)
+    # the loss trains the networks themselves (train_mappo's optimiser groups rely on it)
+    shared = {id(p) for p in loss_module.parameters()}
+    assert all(id(p) in shared for p in [*actor_gnn.parameters(), *critic_gnn.parameters()])
+    assert len(shared) == len([*actor_gnn.parameters(), *critic_gnn.parameters()])
     data = rollout.copy()
     with torch.no_grad():
         actor(data)  # the behaviour policy's log-probabilities

@@ -92,7 +92,8 @@ class OptimConfig:
     """Optimiser settings.
 
     Attributes:
-        lr: Adam learning rate (actor and critic).
+        lr: Adam learning rate of the actor (and of the critic without ``critic_lr``).
+        critic_lr: Learning rate of the critic (``None``: ``lr``).
         lr_anneal: Decay the learning rate linearly to 0 over ``n_iters``.
         epochs: Passes over each batch.
         minibatch_size: Env steps per minibatch.
@@ -101,6 +102,7 @@ class OptimConfig:
     """
 
     lr: float = 3e-4
+    critic_lr: float | None = None
     lr_anneal: bool = False
     epochs: int = 4
     minibatch_size: int = 250
@@ -302,18 +304,19 @@ def train_mappo(config: MAPPOConfig) -> dict[str, Any]:
     actor = build_actor(actor_gnn, config, num_robots)
     critic = build_critic(critic_gnn, config, num_robots)
     loss_module = build_loss(actor, critic, config)
-    optimizer = torch.optim.Adam(loss_module.parameters(), lr=config.optim.lr)
+    critic_lr = config.optim.critic_lr or config.optim.lr
+    optimizer = torch.optim.Adam(  # the loss module shares these parameters (tested)
+        [
+            {"params": list(actor_gnn.parameters()), "lr": config.optim.lr},
+            {"params": list(critic_gnn.parameters()), "lr": critic_lr},
+        ]
+    )
+    base_lrs = [config.optim.lr, critic_lr]
 
-    iteration, best_reward, curve = 0, -math.inf, []
     checkpoint_path = out / "checkpoint.pt"
-    if checkpoint_path.exists():
-        state = torch.load(checkpoint_path, map_location=device, weights_only=False)
-        actor_gnn.load_state_dict(state["state_dict"])
-        critic_gnn.load_state_dict(state["critic"])
-        optimizer.load_state_dict(state["optimizer"])
-        torch.set_rng_state(state["torch_rng"])
-        iteration, best_reward, curve = state["iteration"], state["best_reward"], state["curve"]
-        logger.info("resumed %s at iteration %d", out, iteration)
+    iteration, best_reward, curve = _resume(
+        checkpoint_path, actor_gnn, critic_gnn, optimizer, device
+    )
 
     c = config.collector
     collector = None
@@ -351,8 +354,8 @@ def train_mappo(config: MAPPOConfig) -> dict[str, Any]:
         buffer.empty()
         buffer.extend(data.reshape(-1))
         if config.optim.lr_anneal:
-            for group in optimizer.param_groups:
-                group["lr"] = config.optim.lr * (1 - iteration / c.n_iters)
+            for group, base in zip(optimizer.param_groups, base_lrs, strict=True):
+                group["lr"] = base * (1 - iteration / c.n_iters)
         actor_frozen = iteration < config.optim.critic_warmup_iters
         metrics = _update(loss_module, optimizer, buffer, config, actor_frozen)
         collector.update_policy_weights_()
@@ -387,7 +390,7 @@ def train_mappo(config: MAPPOConfig) -> dict[str, Any]:
                 eval=f"{metrics.get('eval_reward', math.nan):.1f}",
             )
         if "eval_reward" in metrics or iteration == c.n_iters:
-            save_model(
+            save_model(  # a model file (load_model reads the actor) plus the training state
                 checkpoint_path,
                 _cpu(actor_gnn),
                 {**metadata, "iteration": iteration},
@@ -410,6 +413,26 @@ def train_mappo(config: MAPPOConfig) -> dict[str, Any]:
     summary = {"iteration": iteration, "best_eval_reward": best_reward, **metadata, **metrics}
     write_text_atomic(out / "summary.json", json.dumps(summary, indent=2, default=str))
     return summary
+
+
+def _resume(
+    path: Path,
+    actor_gnn: AggregationGNN,
+    critic_gnn: AggregationGNN,
+    optimizer: torch.optim.Optimizer,
+    device: torch.device,
+) -> tuple[int, float, list[dict[str, float]]]:
+    """Loads the checkpoint at ``path`` into the networks and the optimiser, if there is one;
+    returns the iteration, the best evaluation reward and the learning curve so far."""
+    if not path.exists():
+        return 0, -math.inf, []
+    state = torch.load(path, map_location=device, weights_only=False)
+    actor_gnn.load_state_dict(state["state_dict"])
+    critic_gnn.load_state_dict(state["critic"])
+    optimizer.load_state_dict(state["optimizer"])
+    torch.set_rng_state(state["torch_rng"])
+    logger.info("resumed %s at iteration %d", path.parent, state["iteration"])
+    return state["iteration"], state["best_reward"], state["curve"]
 
 
 def _update(
