@@ -105,6 +105,11 @@ def test_prepare_batch_and_episode_rewards(rollout) -> None:  # noqa: ANN001
     assert torch.equal(prepared["next", "robot", "done"][..., 0, :], done)
     assert torch.equal(prepared["next", "robot", "reward"], rollout["next", "robot", "reward"] / 2)
     assert "done" not in rollout["next", "robot"].keys()  # noqa: SIM118 (the input is untouched)
+    own = prepare_batch(rollout.copy(), reward_scale=1.0, reward="own")["next", "robot", "reward"]
+    assert torch.equal(own[..., 0], rollout["next", "robot", "info", "new_interest"].float())
+    torch.testing.assert_close(own.sum(-2), rollout["next", "robot", "reward"][..., 0, :])
+    with pytest.raises(ValueError, match="reward"):
+        prepare_batch(rollout.copy(), 1.0, reward="mine")
     # the team reward of each ended episode is the sum of the rewards since its start
     rewards = rollout["next", "robot", "reward"][..., 0, 0]
     for env_index in range(2):

@@ -5,7 +5,9 @@ The loop (TorchRL's multi-agent PPO recipe, ``sota-implementations/multiagent/ma
 1. A TorchRL collector steps :class:`~agents.batched_env.BatchedCoverageEnv` (``num_envs``
    episodes together; ``workers > 1`` runs that many in worker processes) with the actor, and
    returns ``frames_per_batch`` env steps per iteration.
-2. The team reward is scaled by ``reward_scale``; the episode ends are copied onto every robot;
+2. The reward (``loss.reward``: the team reward, or each robot's own points of interest,
+   ``infos["new_interest"]``, which sum to it) is scaled by ``reward_scale``; the episode ends
+   are copied onto every robot;
    TorchRL's GAE gives each robot's advantage and value target from the critic.
 3. ``epochs`` passes of ``ClipPPOLoss`` over the batch in minibatches (sampled without
    replacement from a TorchRL replay buffer), Adam, gradient clipping.
@@ -74,9 +76,13 @@ class CollectorConfig:
     workers: int = 1
 
 
+REWARDS = ("team", "own")
+
+
 @dataclass
 class LossConfig:
-    """``ClipPPOLoss`` and GAE settings."""
+    """``ClipPPOLoss`` and GAE settings (``reward``: ``"team"`` or ``"own"``, see the module
+    docstring)."""
 
     gamma: float = 0.99
     lmbda: float = 0.95
@@ -85,6 +91,7 @@ class LossConfig:
     critic_coef: float = 0.5
     normalize_advantage: bool = True
     reward_scale: float = 0.1
+    reward: str = "team"
 
 
 @dataclass
@@ -155,6 +162,8 @@ class MAPPOConfig:
             raise ValueError(
                 f"model.actor_input must be state or ego, got {self.model.actor_input!r}"
             )
+        if self.loss.reward not in REWARDS:
+            raise ValueError(f"loss.reward must be one of {REWARDS}, got {self.loss.reward!r}")
         if self.model.value_aggregate not in AGGREGATES:
             raise ValueError(f"model.value_aggregate must be one of {AGGREGATES}")
         if self.logger is None:  # ``logger=none`` on the command line
@@ -258,13 +267,19 @@ def build_loss(actor: Any, critic: Any, config: MAPPOConfig) -> Any:
     return loss
 
 
-def prepare_batch(data: Any, reward_scale: float) -> Any:
-    """Scales the team reward and copies the episode ends onto every robot (GAE reads them
-    beside the per-robot rewards), in place."""
-    shape = data.get(("next", GROUP, "reward")).shape  # (..., R, 1)
+def prepare_batch(data: Any, reward_scale: float, reward: str = "team") -> Any:
+    """Sets the reward each robot learns from (the team reward, or with ``reward="own"`` its
+    own newly visited points of interest) times ``reward_scale``, and copies the episode ends
+    onto every robot (GAE reads them beside the per-robot rewards), in place."""
+    if reward not in REWARDS:
+        raise ValueError(f"reward must be one of {REWARDS}, got {reward!r}")
+    team = data.get(("next", GROUP, "reward"))  # (..., R, 1)
+    if reward == "own":
+        own = data.get(("next", GROUP, "info", "new_interest")).unsqueeze(-1)
+        team = own.to(team.dtype)
     for key in ("done", "terminated"):
-        data.set(("next", GROUP, key), data.get(("next", key)).unsqueeze(-2).expand(shape))
-    data.set(("next", GROUP, "reward"), data.get(("next", GROUP, "reward")) * reward_scale)
+        data.set(("next", GROUP, key), data.get(("next", key)).unsqueeze(-2).expand(team.shape))
+    data.set(("next", GROUP, "reward"), team * reward_scale)
     return data
 
 
@@ -344,7 +359,7 @@ def train_mappo(config: MAPPOConfig) -> dict[str, Any]:
         collect_seconds = time.perf_counter() - start_time
         rewards = episode_rewards(data)
         # a shallow copy: the collector reuses its buffer, and the keys added here must not stay
-        data = prepare_batch(data.copy().to(device), config.loss.reward_scale)
+        data = prepare_batch(data.copy().to(device), config.loss.reward_scale, config.loss.reward)
         with torch.no_grad():
             loss_module.value_estimator(
                 data,
@@ -378,6 +393,8 @@ def train_mappo(config: MAPPOConfig) -> dict[str, Any]:
             if metrics["eval_reward"] > best_reward:
                 best_reward = metrics["eval_reward"]
                 save_model(out / "best.pt", _cpu(actor_gnn), {**metadata, "iteration": iteration})
+        previous_wall = curve[-1].get("wall_seconds", 0.0) if curve else 0.0
+        metrics["wall_seconds"] = previous_wall + time.perf_counter() - start_time
         curve.append({"iteration": iteration, **metrics})
         if log is not None:
             for key, value in metrics.items():
