@@ -214,3 +214,16 @@ def test_worker_processes_collect_the_same_budget(tmp_path: Path) -> None:
     summary = train_mappo(config)
     assert summary["frames"] == 800 and summary["episodes"] == 2 * 20  # 10-step episodes
     assert np.isfinite(summary["eval_reward"])
+
+
+def test_temperature_sharpens_sampling_and_keeps_the_argmax(rollout, tmp_path: Path) -> None:  # noqa: ANN001
+    torch.manual_seed(4)
+    gnn = AggregationGNN(GNNConfig(kind="linear", hops=3))
+    plain = build_actor(gnn, tiny_config(tmp_path), 3)(rollout[:, 0].clone())
+    sharp = build_actor(gnn, tiny_config(tmp_path, "model.temperature=0.5"), 3)(
+        rollout[:, 0].clone()
+    )
+    torch.testing.assert_close(sharp["robot", "logits"], 2 * plain["robot", "logits"])
+    assert torch.equal(sharp["robot", "logits"].argmax(-1), plain["robot", "logits"].argmax(-1))
+    with pytest.raises(ValueError, match="temperature"):
+        build_actor(gnn, tiny_config(tmp_path, "model.temperature=0"), 3)

@@ -115,11 +115,28 @@ def flat_batch(
     return batch
 
 
+class Tempered(nn.Module):
+    """A ``(logits, mask)`` module with its logits divided by ``temperature`` (below 1: a
+    sharper sampling policy with the same argmax)."""
+
+    def __init__(self, module: nn.Module, temperature: float) -> None:
+        super().__init__()
+        if temperature <= 0:
+            raise ValueError(f"temperature must be > 0, got {temperature}")
+        self.module = module
+        self.temperature = temperature
+
+    def forward(self, *inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        logits, mask = self.module(*inputs)
+        return logits / self.temperature, mask
+
+
 def make_actor(
     gnn: AggregationGNN,
     observation_key: Any = "observation",
     action_key: Any = "action",
     mask_key: Any = None,
+    temperature: float = 1.0,
 ) -> Any:
     """A TorchRL ``ProbabilisticActor`` over ``EgoGraphLogits`` with a ``MaskedCategorical``.
 
@@ -131,11 +148,12 @@ def make_actor(
             beside it (``"logits"``, ``"mask"``, ``"sample_log_prob"`` under the same prefix).
         mask_key: Where the action mask is read (default: ``action_mask`` inside the
             observation; TorchRL's ``PettingZooWrapper`` lifts it to ``(group, "action_mask")``).
+        temperature: Divides the logits of the sampling policy (see :class:`Tempered`).
     """
     prefix = observation_key if isinstance(observation_key, tuple) else (observation_key,)
     in_keys = [(*prefix, key) for key in GRAPH_KEYS[:-1]]
     in_keys.append(mask_key if mask_key is not None else (*prefix, "action_mask"))
-    return _masked_actor(EgoGraphLogits(gnn), in_keys, action_key)
+    return _masked_actor(EgoGraphLogits(gnn), in_keys, action_key, temperature)
 
 
 def make_state_actor(
@@ -144,15 +162,20 @@ def make_state_actor(
     state_key: Any = "state",
     action_key: Any = ("robot", "action"),
     mask_key: Any = ("robot", "action_mask"),
+    temperature: float = 1.0,
 ) -> Any:
     """A ``ProbabilisticActor`` of every robot at once over :class:`StateLogits` (the keys of
-    :class:`agents.batched_env.BatchedCoverageEnv` by default)."""
+    :class:`agents.batched_env.BatchedCoverageEnv` by default; ``temperature`` as in
+    :func:`make_actor`)."""
     prefix = state_key if isinstance(state_key, tuple) else (state_key,)
     in_keys = [(*prefix, key) for key in (*GRAPH_KEYS[:-1], "node_mask")]
-    return _masked_actor(StateLogits(gnn, num_robots), [*in_keys, mask_key], action_key)
+    module = StateLogits(gnn, num_robots)
+    return _masked_actor(module, [*in_keys, mask_key], action_key, temperature)
 
 
-def _masked_actor(logits_module: nn.Module, in_keys: list[Any], action_key: Any) -> Any:
+def _masked_actor(
+    logits_module: nn.Module, in_keys: list[Any], action_key: Any, temperature: float = 1.0
+) -> Any:
     """A ``ProbabilisticActor`` with a ``MaskedCategorical`` over a module returning
     ``(logits, mask)``; logits, mask and log-probability are written beside ``action_key``."""
     from tensordict.nn import TensorDictModule
@@ -161,6 +184,8 @@ def _masked_actor(logits_module: nn.Module, in_keys: list[Any], action_key: Any)
     def beside(name: str) -> Any:
         return (*action_key[:-1], name) if isinstance(action_key, tuple) else name
 
+    if temperature != 1.0:
+        logits_module = Tempered(logits_module, temperature)
     module = TensorDictModule(
         logits_module, in_keys=in_keys, out_keys=[beside("logits"), beside("mask")]
     )

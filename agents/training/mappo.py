@@ -119,12 +119,15 @@ class OptimConfig:
 
 @dataclass
 class ModelConfig:
-    """Actor and critic networks."""
+    """Actor and critic networks (``temperature``: the sampling policy's logits are divided by
+    it during training; below 1 the policy PPO improves is closer to the argmax policy that is
+    evaluated and deployed, whose actions it does not change)."""
 
     actor: GNNConfig = field(default_factory=lambda: GNNConfig(kind="linear", hops=19))
     critic: GNNConfig = field(default_factory=lambda: GNNConfig(kind="linear", hops=19))
     actor_input: str = "state"
     value_aggregate: str = "robot"
+    temperature: float = 1.0
 
 
 @dataclass
@@ -213,13 +216,15 @@ def make_env(config: MAPPOConfig) -> Any:
 
 def build_actor(gnn: AggregationGNN, config: MAPPOConfig, num_robots: int) -> Any:
     """The ``ProbabilisticActor`` on the batched environment's keys."""
+    temperature = config.model.temperature
     if config.model.actor_input == "state":
-        return make_state_actor(gnn, num_robots)
+        return make_state_actor(gnn, num_robots, temperature=temperature)
     return make_actor(
         gnn,
         observation_key=(GROUP, "observation"),
         action_key=(GROUP, "action"),
         mask_key=(GROUP, "action_mask"),
+        temperature=temperature,
     )
 
 
