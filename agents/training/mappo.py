@@ -7,8 +7,8 @@ The loop (TorchRL's multi-agent PPO recipe, ``sota-implementations/multiagent/ma
    returns ``frames_per_batch`` env steps per iteration.
 2. The reward (``loss.reward``: the team reward, or each robot's own points of interest,
    ``infos["new_interest"]``, which sum to it) is scaled by ``reward_scale``; the episode ends
-   are copied onto every robot;
-   TorchRL's GAE gives each robot's advantage and value target from the critic.
+   are copied onto every robot; TorchRL's GAE gives each robot's advantage and value target
+   from the critic.
 3. ``epochs`` passes of ``ClipPPOLoss`` over the batch in minibatches (sampled without
    replacement from a TorchRL replay buffer), Adam, gradient clipping.
 4. Every ``eval.every`` iterations: the argmax policy on the evaluation seeds through the
@@ -23,11 +23,14 @@ about a quarter of the work; ``"ego"`` runs it on the ego-graphs the robots obse
 
 Fine-tuning: ``init`` loads a behaviour-cloned model as the actor (its GNN config replaces
 ``model.actor``); ``optim.critic_warmup_iters`` trains only the critic for the first iterations,
-so that an untrained critic does not push the cloned policy around.
+so that an untrained critic does not push the cloned policy around; ``model.temperature < 1``
+samples from a sharper policy with the same argmax.
 
 Outputs in ``out``: ``config.yaml``, ``checkpoint.pt`` (resumable: re-run with the same ``out``),
 ``best.pt`` and ``model.pt`` (actor model files that ``scripts/evaluate.py checkpoint=...``
-reads), ``log/`` (TorchRL CSV or TensorBoard logger), ``curve.json`` and ``summary.json``.
+reads), ``log/`` (TorchRL CSV or TensorBoard logger), ``curve.json`` (per iteration: losses,
+sampled episode rewards, evaluation reward, collection/update/wall seconds) and
+``summary.json``.
 """
 
 from __future__ import annotations
