@@ -109,6 +109,7 @@ class BatchedCoverageEnv(EnvBase):
 
     @property
     def num_envs(self) -> int:
+        """Episodes stepped together (the batch size)."""
         return len(self.envs)
 
     def _make_specs(self) -> None:
