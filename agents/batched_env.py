@@ -215,13 +215,10 @@ class BatchedCoverageEnv(EnvBase):
                 )
             moves = env.apply_actions(action[i].astype(np.int64))
             reward[i] = float(moves.new_interest.sum())
-            terminated[i] = moves.terminated
-            truncated[i] = moves.out_of_time and not moves.terminated
-            if terminated[i] or truncated[i]:
-                env.agents = []
+            terminated[i], truncated[i] = moves.terminated, moves.truncated
             info = {
                 "new_interest": moves.new_interest,
-                "total_interest": env._credits.copy(),
+                "total_interest": env.credits,
                 "blocked": moves.blocked,
                 "invalid_action": moves.invalid,
             }
@@ -244,7 +241,8 @@ class BatchedCoverageEnv(EnvBase):
         return row
 
     def _merge(self, rows: dict[int, dict[str, np.ndarray]], reset: bool) -> dict[str, np.ndarray]:
-        """Stacks every episode's arrays; episodes without a new row keep their last ones."""
+        """Stacks every episode's arrays; episodes without a new row keep their last ones, and
+        the keys a new row lacks (the infos, after a reset) read 0."""
         if len(rows) == self.num_envs:
             out = {k: np.stack([rows[i][k] for i in range(self.num_envs)]) for k in rows[0]}
         else:
@@ -254,14 +252,11 @@ class BatchedCoverageEnv(EnvBase):
                 for i, row in rows.items():
                     array[i] = row.get(key, 0)
                 out[key] = array
-        if reset:  # the infos of a fresh episode are zeros
+        if reset:  # the infos of a fresh episode are zeros (kept rows were zeroed above)
             for key, dtype in INFO_KEYS.items():
-                info = out.get(f"info.{key}")
-                if info is None:
-                    info = np.zeros((self.num_envs, self.num_robots), dtype=dtype_numpy(dtype))
-                for i in rows:
-                    info[i] = 0
-                out[f"info.{key}"] = info
+                if f"info.{key}" not in out:
+                    zeros = torch.zeros((self.num_envs, self.num_robots), dtype=dtype)
+                    out[f"info.{key}"] = zeros.numpy()
         self._last = out
         return out
 
@@ -289,8 +284,3 @@ class BatchedCoverageEnv(EnvBase):
             batch_size=(n,),
         )
         return result.to(self.device) if self.device != torch.device("cpu") else result
-
-
-def dtype_numpy(dtype: torch.dtype) -> type:
-    """The numpy dtype of an :data:`INFO_KEYS` entry."""
-    return np.bool_ if dtype == torch.bool else np.int64

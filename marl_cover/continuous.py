@@ -291,6 +291,7 @@ class QuadrotorCoverageEnv(CoverageEnv):
             RuntimeError: the episode is over.
             ValueError: as :meth:`CoverageEnv.step`.
         """
+        agents = self.agents
         action = self._read_actions(actions)  # (R,)
         proposed, invalid = self._propose(action)  # (R,), (R,)
         self._target = resolve_collisions(self._target, proposed, self.config.allow_swaps)
@@ -299,7 +300,8 @@ class QuadrotorCoverageEnv(CoverageEnv):
         self._num_steps += 1
         self._trails.append(self._robot_node.copy())
         infos = self._continuous_infos(new_interest, blocked, invalid)
-        return self._step_result(new_interest, self._tick >= self.dynamics.max_ticks, infos)
+        terminated, truncated = self._end_of_step(self._tick >= self.dynamics.max_ticks)
+        return self._step_result(agents, new_interest, terminated, truncated, infos)
 
     def _propose(self, action: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Targets the ready robots ask for (from their snapped waypoints); others keep theirs."""

@@ -115,15 +115,14 @@ class Moves:
         blocked: Robots the collision resolver kept from their target, ``(R,)`` bool.
         invalid: Robots whose action was masked out (a no-op), ``(R,)`` bool.
         terminated: Every point of interest has been visited.
-        out_of_time: The episode has used its ``max_steps`` actions (a truncation unless
-            ``terminated``).
+        truncated: The episode has used its ``max_steps`` actions and is not terminated.
     """
 
     new_interest: np.ndarray
     blocked: np.ndarray
     invalid: np.ndarray
     terminated: bool
-    out_of_time: bool
+    truncated: bool
 
 
 @dataclass(frozen=True)
@@ -315,45 +314,50 @@ class CoverageEnv(ParallelEnv):
             ValueError: an agent is missing or unknown, an action is out of range, or (with
                 ``invalid_action="raise"``) an action is masked out; the message names the robot.
         """
+        agents = self.agents  # the live agents of this step (apply_actions may end the episode)
         moves = self.apply_actions(self._read_actions(actions))
         infos = self._infos(moves.new_interest, moves.blocked, moves.invalid)
-        return self._step_result(moves.new_interest, moves.out_of_time, infos)
+        return self._step_result(
+            agents, moves.new_interest, moves.terminated, moves.truncated, infos
+        )
 
     def apply_actions(self, action: np.ndarray) -> Moves:
         """The step's dynamics without the PettingZoo dictionaries (the core that batched
         environments share): resolves ``action`` ``(R,)`` (integers in ``[0, 5)``, already
-        checked), moves the robots and marks visits. ``step`` is this plus observations and
-        the end-of-episode bookkeeping; after it, :meth:`observe_batch` and :meth:`state` give
-        the new observations.
+        checked), moves the robots, marks visits and ends the episode (no live agents) when it
+        is over. ``step`` is this plus the observations and dictionaries; after it,
+        :meth:`observe_batch` and :meth:`state` give the new observations.
         """
         targets, invalid = self._targets(action)  # (R,), (R,)
         next_node = resolve_collisions(self._robot_node, targets, self.config.allow_swaps)
         blocked = next_node != targets
         new_interest = self._visit(next_node)  # (R,)
         self._num_steps += 1
-        return Moves(
-            new_interest=new_interest,
-            blocked=blocked,
-            invalid=invalid,
-            terminated=self._all_covered(),
-            out_of_time=self._num_steps >= self.config.max_steps,
-        )
+        terminated, truncated = self._end_of_step(self._num_steps >= self.config.max_steps)
+        return Moves(new_interest, blocked, invalid, terminated, truncated)
 
-    def _step_result(
-        self, new_interest: np.ndarray, out_of_time: bool, infos: dict[str, dict[str, Any]]
-    ) -> StepResult:
-        """The return of ``step``: observations, the team reward, termination (everything
-        covered), truncation (``out_of_time`` and not terminated) and ``infos``; ends the episode
-        when either holds."""
+    def _end_of_step(self, out_of_time: bool) -> tuple[bool, bool]:
+        """Termination (everything covered) and truncation (``out_of_time`` and not terminated)
+        of the step just taken; ends the episode when either holds."""
         terminated = self._all_covered()
         truncated = out_of_time and not terminated
-        reward = float(new_interest.sum())
-        observations = self._observe()
-        agents = self.agents
         if terminated or truncated:
             self.agents = []
+        return terminated, truncated
+
+    def _step_result(
+        self,
+        agents: list[str],
+        new_interest: np.ndarray,
+        terminated: bool,
+        truncated: bool,
+        infos: dict[str, dict[str, Any]],
+    ) -> StepResult:
+        """The return of ``step`` for the step's live ``agents``: observations, the team reward,
+        termination, truncation and ``infos``."""
+        reward = float(new_interest.sum())
         return (
-            observations,
+            self._observe(),
             dict.fromkeys(agents, reward),
             dict.fromkeys(agents, terminated),
             dict.fromkeys(agents, truncated),
@@ -420,6 +424,11 @@ class CoverageEnv(ParallelEnv):
         self._waypoint_features[nodes, 2] = 0.0
         self._credits += new_interest
         return new_interest
+
+    @property
+    def credits(self) -> np.ndarray:
+        """Points of interest each robot has visited first this episode, ``(R,)`` (a copy)."""
+        return self._credits.copy()
 
     def _infos(
         self, new_interest: np.ndarray, blocked: np.ndarray, invalid: np.ndarray

@@ -121,6 +121,18 @@ def collection_cases(seconds: float, num_envs: int, backend: str) -> dict:
     }
 
 
+def print_row(
+    name: str, env_steps: float, agent_steps: float, obs_mb: str = "", peak_mb: str = ""
+) -> None:
+    """One line of the table (the case's target is looked up by its letter)."""
+    target = TARGETS.get(name[0])
+    print(
+        f"{name:<38} {env_steps:12.0f} {agent_steps:14.0f} {obs_mb:>12} {peak_mb:>13} "
+        f"{(f'>= {target:.0f}' if target else '-'):>8}",
+        flush=True,
+    )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=5.0)
@@ -146,12 +158,12 @@ def main() -> None:
             print(f"{name:<38} skipped: {error}")
             continue
         results[name] = result
-        target = TARGETS.get(name[0])
-        print(
-            f"{name:<38} {result['env_steps_per_s']:12.0f} {result['agent_steps_per_s']:14.0f} "
-            f"{result['observation_mb_per_step']:12.2f} {result['step_peak_mb']:13.2f} "
-            f"{(f'>= {target:.0f}' if target else '-'):>8}",
-            flush=True,
+        print_row(
+            name,
+            result["env_steps_per_s"],
+            result["agent_steps_per_s"],
+            f"{result['observation_mb_per_step']:.2f}",
+            f"{result['step_peak_mb']:.2f}",
         )
     if not args.skip_collectors:
         try:
@@ -161,13 +173,8 @@ def main() -> None:
             print(f"{'d, e: TorchRL collection':<38} skipped: {error}")
         for name, result in collected.items():
             results[name] = result
-            target = TARGETS.get(name[0])
-            print(
-                f"{name:<38} {result['frames_per_s']:12.0f} "
-                f"{result['frames_per_s'] * COLLECTION['num_robots']:14.0f} {'':>12} {'':>13} "
-                f"{(f'>= {target:.0f}' if target else '-'):>8}",
-                flush=True,
-            )
+            frames = result["frames_per_s"]
+            print_row(name, frames, frames * COLLECTION["num_robots"])
         if len(collected) == 2:
             d, e = (r["frames_per_s"] for r in collected.values())
             results["ratio d / e"] = d / e

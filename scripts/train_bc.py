@@ -12,35 +12,19 @@ overridden; an unknown key is an error.
 
 from __future__ import annotations
 
-import argparse
-import json
-import logging
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from agents import configuration  # noqa: E402
 from agents.training.bc import BCConfig, train_bc  # noqa: E402
+from agents.training.runs import command_line  # noqa: E402
 
 DEFAULT_CONFIG = Path(__file__).resolve().parent.parent / "configs" / "bc_coverage.yaml"
 
 
 def main(argv: list[str]) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--config", default=str(DEFAULT_CONFIG), help="YAML preset")
-    parser.add_argument("overrides", nargs="*", help="key=value overrides")
-    args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.WARNING)
-    import torchrl  # noqa: F401 (configures its logger on import; quieten it after)
-
-    logging.getLogger("torchrl").setLevel(logging.WARNING)  # it logs buffer set-up to stdout
-    try:
-        config = configuration.load(BCConfig, args.config, args.overrides)
-    except (ValueError, FileNotFoundError) as error:
-        raise SystemExit(str(error)) from error
-    summary = train_bc(config)
-    print(json.dumps(summary, indent=2))
+    command_line(argv, __doc__, BCConfig, DEFAULT_CONFIG, train_bc)
 
 
 if __name__ == "__main__":

@@ -15,35 +15,19 @@ from ``out/checkpoint.pt``; ``collector.n_iters`` may grow between runs.
 
 from __future__ import annotations
 
-import argparse
-import json
-import logging
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from agents import configuration  # noqa: E402
 from agents.training.mappo import MAPPOConfig, train_mappo  # noqa: E402
+from agents.training.runs import command_line  # noqa: E402
 
 DEFAULT_CONFIG = Path(__file__).resolve().parent.parent / "configs" / "mappo_coverage.yaml"
 
 
 def main(argv: list[str]) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--config", default=str(DEFAULT_CONFIG), help="YAML preset")
-    parser.add_argument("overrides", nargs="*", help="key=value overrides")
-    args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.WARNING)
-    import torchrl  # noqa: F401 (configures its logger on import; quieten it after)
-
-    logging.getLogger("torchrl").setLevel(logging.WARNING)
-    try:
-        config = configuration.load(MAPPOConfig, args.config, args.overrides)
-        summary = train_mappo(config)
-    except (ValueError, FileNotFoundError) as error:
-        raise SystemExit(f"train_mappo: {error}") from error
-    print(json.dumps(summary, indent=2, default=str))
+    command_line(argv, __doc__, MAPPOConfig, DEFAULT_CONFIG, train_mappo)
 
 
 if __name__ == "__main__":

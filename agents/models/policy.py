@@ -38,39 +38,15 @@ from marl_cover.ego import NUM_ACTIONS
 GRAPH_KEYS = ("nodes", "edge_index", "edge_attr", "edge_mask", "action_mask")
 
 
-class EgoGraphLogits(nn.Module):
-    """Action logits ``(..., 5)`` and mask ``(..., 5)`` bool from padded ego-graphs ``(..., M, *)``.
-
-    Masked actions get logit 0 (finite, so that entropies and gradients stay clean); the mask
-    output is what a ``MaskedCategorical`` must read.
-    """
-
-    def __init__(self, gnn: AggregationGNN) -> None:
-        super().__init__()
-        self.gnn = gnn
-
-    def forward(
-        self,
-        nodes: torch.Tensor,
-        edge_index: torch.Tensor,
-        edge_attr: torch.Tensor,
-        edge_mask: torch.Tensor,
-        action_mask: torch.Tensor,
-    ) -> tuple[torch.Tensor, torch.Tensor]:
-        lead = nodes.shape[:-2]
-        batch = flat_batch(nodes, edge_index, edge_attr, edge_mask)
-        logits = decentralized_logits(self.gnn, batch)  # (B, 5), -inf where no action edge
-        mask = action_mask.reshape(-1, NUM_ACTIONS).bool() & torch.isfinite(logits)
-        logits = logits.masked_fill(~mask, 0.0)
-        return logits.view(*lead, NUM_ACTIONS), mask.view(*lead, NUM_ACTIONS)
-
-
 class StateLogits(nn.Module):
-    """Action logits ``(..., R, 5)`` and mask of every robot from padded states ``(..., M, *)``.
+    """Action logits ``(..., R, 5)`` and mask ``(..., R, 5)`` bool of every robot from padded
+    states ``(..., M, *)`` (whose first ``5 R`` edges are the robots' action edges).
 
     One pass over each state gives every robot's logits: the same numbers as
     :class:`EgoGraphLogits` on the robots' ego-graphs (the ego-graph holds the network's whole
-    receptive field), for about ``1 / R`` of the work; training loops use it.
+    receptive field), for about ``1 / R`` of the work; training loops use it. Masked actions
+    get logit 0 (finite, so that entropies and gradients stay clean); the mask output is what a
+    ``MaskedCategorical`` must read.
     """
 
     def __init__(self, gnn: AggregationGNN, num_robots: int) -> None:
@@ -84,15 +60,36 @@ class StateLogits(nn.Module):
         edge_index: torch.Tensor,
         edge_attr: torch.Tensor,
         edge_mask: torch.Tensor,
-        node_mask: torch.Tensor,
+        node_mask: torch.Tensor | None,
         action_mask: torch.Tensor,
     ) -> tuple[torch.Tensor, torch.Tensor]:
         lead, r = nodes.shape[:-2], self.num_robots
         batch = flat_batch(nodes, edge_index, edge_attr, edge_mask, node_mask)
-        logits = batched_state_logits(self.gnn, batch, r)  # (B, R, 5)
+        logits = batched_state_logits(self.gnn, batch, r)  # (B, R, 5), -inf without an edge
         mask = action_mask.reshape(-1, r, NUM_ACTIONS).bool() & torch.isfinite(logits)
         logits = logits.masked_fill(~mask, 0.0)
         return logits.view(*lead, r, NUM_ACTIONS), mask.view(*lead, r, NUM_ACTIONS)
+
+
+class EgoGraphLogits(StateLogits):
+    """Action logits ``(..., 5)`` and mask ``(..., 5)`` bool of each ego robot from its padded
+    ego-graph ``(..., M, *)``: an ego-graph is laid out as a state with one robot, the ego."""
+
+    def __init__(self, gnn: AggregationGNN) -> None:
+        super().__init__(gnn, num_robots=1)
+
+    def forward(  # type: ignore[override]
+        self,
+        nodes: torch.Tensor,
+        edge_index: torch.Tensor,
+        edge_attr: torch.Tensor,
+        edge_mask: torch.Tensor,
+        action_mask: torch.Tensor,
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        logits, mask = super().forward(
+            nodes, edge_index, edge_attr, edge_mask, None, action_mask.unsqueeze(-2)
+        )
+        return logits.squeeze(-2), mask.squeeze(-2)
 
 
 def flat_batch(

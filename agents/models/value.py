@@ -59,12 +59,12 @@ class StateValue(nn.Module):
         return values.reshape(*lead, r, 1)
 
 
-class EgoValue(nn.Module):
-    """Value ``(..., 1)`` of each ego robot from its padded ego-graph ``(..., M, *)``."""
+class EgoValue(StateValue):
+    """Value ``(..., 1)`` of each ego robot from its padded ego-graph ``(..., M, *)`` (laid
+    out as a state with one robot, the ego)."""
 
     def __init__(self, gnn: AggregationGNN) -> None:
-        super().__init__()
-        self.gnn = gnn
+        super().__init__(gnn, num_robots=1)
 
     def forward(
         self,
@@ -74,8 +74,4 @@ class EgoValue(nn.Module):
         edge_mask: torch.Tensor,
         node_mask: torch.Tensor,
     ) -> torch.Tensor:
-        lead = nodes.shape[:-2]
-        batch = flat_batch(nodes, edge_index, edge_attr, edge_mask, node_mask)
-        flat_nodes, flat_index, flat_attr, heads = flatten_padded(batch)
-        values = self.gnn(flat_nodes, flat_index, flat_attr, out_edges=heads[:, 0])
-        return values.reshape(*lead, 1)
+        return super().forward(nodes, edge_index, edge_attr, edge_mask, node_mask).squeeze(-2)

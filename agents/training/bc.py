@@ -44,7 +44,7 @@ from agents.evaluation import evaluate
 from agents.models.gnn import AggregationGNN, GNNConfig, action_logits
 from agents.models.policy import GNNPolicy, load_model, save_model
 from agents.training.data import GraphTable, collate_states, episode_transitions
-from agents.training.runs import check_same_run, make_logger
+from agents.training.runs import LOGGERS, check_same_run, make_logger
 from marl_cover.env import CoverageEnv
 
 logger = logging.getLogger(__name__)
@@ -105,8 +105,8 @@ class BCConfig:
             raise ValueError("batch_size and val_every must be >= 1 and steps >= 0")
         if not 0.0 < self.val_fraction < 1.0:
             raise ValueError(f"val_fraction must be in (0, 1), got {self.val_fraction}")
-        if self.logger not in ("csv", "tensorboard", "none"):
-            raise ValueError(f"logger must be csv, tensorboard or none, got {self.logger!r}")
+        if self.logger not in LOGGERS:
+            raise ValueError(f"logger must be one of {LOGGERS}, got {self.logger!r}")
         if len(self.holdout_seeds) != 2:
             raise ValueError("holdout_seeds is [first, stop)")
 

@@ -358,8 +358,7 @@ def train_mappo(config: MAPPOConfig) -> dict[str, Any]:
 
         progress = tqdm(total=c.n_iters, initial=iteration, unit="iter", desc=config.algorithm)
     if iteration == 0 and not curve:  # where training starts (the BC model when fine-tuning)
-        reward = evaluate(eval_env, _eval_policy(actor_gnn), _eval_seeds(config)).mean
-        actor_gnn.train()
+        reward = _evaluate(eval_env, actor_gnn, config)
         curve.append({"iteration": 0, "frames": 0.0, "observations": 0.0, "eval_reward": reward})
     start_time = time.perf_counter()
     metrics: dict[str, float] = {}
@@ -395,9 +394,7 @@ def train_mappo(config: MAPPOConfig) -> dict[str, Any]:
             }
         )
         if iteration % config.eval.every == 0 or iteration == c.n_iters:
-            seeds = _eval_seeds(config)
-            metrics["eval_reward"] = evaluate(eval_env, _eval_policy(actor_gnn), seeds).mean
-            actor_gnn.train()
+            metrics["eval_reward"] = _evaluate(eval_env, actor_gnn, config)
             if metrics["eval_reward"] > best_reward:
                 best_reward = metrics["eval_reward"]
                 save_model(out / "best.pt", _cpu(actor_gnn), {**metadata, "iteration": iteration})
@@ -514,12 +511,13 @@ class _EnvFactory:
         return make_env(self.config)
 
 
-def _eval_seeds(config: MAPPOConfig) -> range:
-    return range(config.eval.seed, config.eval.seed + config.eval.episodes)
-
-
-def _eval_policy(gnn: AggregationGNN) -> GNNPolicy:
-    return GNNPolicy(_cpu(gnn), centralized=True)
+def _evaluate(env: CoverageEnv, gnn: AggregationGNN, config: MAPPOConfig) -> float:
+    """Mean reward of the argmax policy (one pass per state) on the evaluation seeds; leaves
+    ``gnn`` in training mode."""
+    seeds = range(config.eval.seed, config.eval.seed + config.eval.episodes)
+    reward = evaluate(env, GNNPolicy(_cpu(gnn), centralized=True), seeds).mean
+    gnn.train()
+    return reward
 
 
 def _cpu(gnn: AggregationGNN) -> AggregationGNN:

@@ -1,8 +1,9 @@
-"""What every training run shares: its folder's config check and its TorchRL logger."""
+"""What every training run shares: its command line, its folder's config check and its TorchRL
+logger."""
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
@@ -50,3 +51,40 @@ def make_logger(kind: str, out: Path) -> Any:
     from torchrl.record.loggers import CSVLogger
 
     return CSVLogger(exp_name="log", log_dir=str(out))
+
+
+def command_line(
+    argv: list[str],
+    doc: str,
+    config_class: type,
+    default_config: Path,
+    train: Callable[[Any], dict[str, Any]],
+) -> None:
+    """A training script's ``main``: ``[--config YAML] key=value ...`` -> the typed config ->
+    ``train(config)`` -> its summary as JSON on stdout.
+
+    Bad settings (an unknown key, a missing file, a bad value) exit with a one-line message
+    that names the script and the problem.
+    """
+    import argparse
+    import json
+    import logging
+    import sys
+
+    from agents import configuration
+
+    parser = argparse.ArgumentParser(description=doc.split("\n")[0])
+    parser.add_argument("--config", default=str(default_config), help="YAML preset")
+    parser.add_argument("overrides", nargs="*", help="key=value overrides")
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.WARNING)
+    import torchrl  # noqa: F401 (configures its logger on import; quieten it after)
+
+    logging.getLogger("torchrl").setLevel(logging.WARNING)  # it logs buffer set-up to stdout
+    script = Path(sys.argv[0]).stem
+    try:
+        config = configuration.load(config_class, args.config, args.overrides)
+        summary = train(config)
+    except (ValueError, FileNotFoundError) as error:
+        raise SystemExit(f"{script}: {error}") from error
+    print(json.dumps(summary, indent=2, default=str))
