@@ -1,6 +1,8 @@
 # make demo: set up .venv; the shipped GNN beside greedy and the expert on procedural cities (+ GIF).
+# make demo TASK=exploration: the same on the exploration task.
 # make test: set up .venv and run the test suite.
 PYTHON ?= python3
+TASK ?= coverage
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-$(shell cat pyproject.toml constraints.txt | cksum | cut -d' ' -f1)
@@ -14,7 +16,7 @@ $(STAMP): pyproject.toml constraints.txt
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(PY) scripts/demo.py
+	$(PY) scripts/demo.py --task $(TASK)
 
 test: $(STAMP)
 	$(PY) -m pytest

@@ -3,8 +3,11 @@
 An episode stores its map (neighbour table, grid cells, cell size), its points of interest (as
 bits), the robots' waypoints before every step ``(T + 1, R)`` and the actions ``(T, R)``.
 Everything else is derived: the visited set at step ``t`` is the union of the waypoints the
-robots stood on up to ``t``, and observations are rebuilt on demand with the environment's own
-ego-graph builder. About 6 kB per 228-waypoint episode, where the paper stored 120 kB per step.
+robots stood on up to ``t``, in exploration the discovered set is the union of their sensor
+footprints (so an omniscient expert's coverage dataset is also its exploration dataset: the
+expert ignores discovery and the environment draws the same episodes), and observations are
+rebuilt on demand with the environment's own ego-graph builder. About 6 kB per 228-waypoint
+episode, where the paper stored 120 kB per step.
 
 Episodes are grouped in shards (``shard_00000.npz``...), each covering a fixed range of episode
 seeds, written to a temporary file and renamed, so an interrupted collection resumes by
@@ -20,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from agents.cli import write_bytes_atomic
+from marl_cover.discovery import discovery_steps, frontier_of, known_neighbors, sensor_footprints
 from marl_cover.ego import PaddedShape, build_ego_graphs, waypoint_features
 from marl_cover.env import CoverageEnv
 from marl_cover.graph import SpatialGraph
@@ -64,12 +68,31 @@ class Episode:
             - (self.interest[self.robot_node[0]]).sum()
         )
 
+    def discovered(self, step: int, sensor_range: float) -> np.ndarray:
+        """Exploration: waypoints the team knew before action ``step``, ``(N,)`` bool (the
+        recorded positions and the sensor range determine it)."""
+        footprint = sensor_footprints(self.graph, sensor_range)
+        return discovery_steps(footprint, self.robot_node[: step + 1]) <= step
+
     def observations(
-        self, step: int, hops: int, shape: PaddedShape, backend: str = "numpy"
+        self,
+        step: int,
+        hops: int,
+        shape: PaddedShape,
+        backend: str = "numpy",
+        sensor_range: float | None = None,
     ) -> dict[str, np.ndarray]:
-        """Every robot's ego-observation before action ``step``, stacked over robots."""
+        """Every robot's ego-observation before action ``step``, stacked over robots
+        (exploration when ``sensor_range`` is given)."""
         features = waypoint_features(self.interest & ~self.visited(step))
-        return build_ego_graphs(self.graph, self.robot_node[step], features, hops, shape, backend)
+        neighbors = None
+        if sensor_range is not None:
+            discovered = self.discovered(step, sensor_range)
+            features[:, 3] = frontier_of(self.graph, discovered)
+            neighbors = known_neighbors(self.graph, discovered)
+        return build_ego_graphs(
+            self.graph, self.robot_node[step], features, hops, shape, backend, neighbors
+        )
 
 
 def record_episode(env: CoverageEnv, policy, seed: int) -> Episode:  # noqa: ANN001

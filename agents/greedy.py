@@ -2,11 +2,13 @@
 
 Rule (both variants give the same actions):
 
-- A robot looks at the waypoints within ``hops`` hops of its own waypoint and at the unvisited
-  points of interest among them.
-- It takes the move whose target waypoint is nearest (in hops) to any such point; ties go to
+- A robot looks at the waypoints within ``hops`` hops of its own waypoint and at its *targets*
+  among them: the unvisited points of interest and, in exploration, the frontier waypoints
+  (discovered waypoints next to undiscovered ones; in coverage there are none). Distances are
+  hops on the graph the robot observes, which in exploration is the known graph only.
+- It takes the move whose target waypoint is nearest (in hops) to any target; ties go to
   the lowest action slot (east, north, west, south). This is one hop along a shortest path to a
-  nearest point of interest.
+  nearest target: a known point of interest or the nearest edge of the unknown.
 - When no point of interest lies within ``hops`` hops it stays (action 0), or, with
   ``fallback="random"``, takes a uniformly random available move from the policy's own seeded
   generator (the paper's code moved at random).
@@ -24,13 +26,14 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
 FALLBACKS = ("stay", "random")
-_INTEREST = 2  # column of is_interest in the node features
+_TARGETS = [2, 3]  # columns is_interest and is_frontier of the node features
 
 
 def _distance_to_interest(
     nodes: np.ndarray, edge_index: np.ndarray, edge_mask: np.ndarray, limit: int
 ) -> np.ndarray:
-    """Hop distance from every node to the nearest interest node, ``inf`` beyond ``limit``.
+    """Hop distance from every node to the nearest target (point of interest or frontier
+    node), ``inf`` beyond ``limit``.
 
     Args:
         nodes: ``(num_nodes, 4)`` node features.
@@ -44,7 +47,7 @@ def _distance_to_interest(
     adjacency = csr_matrix(
         (np.ones(len(senders)), (senders, receivers)), shape=(num_nodes, num_nodes)
     )
-    sources = np.flatnonzero(nodes[:, _INTEREST] > 0)
+    sources = np.flatnonzero((nodes[:, _TARGETS] > 0).any(axis=1))
     if len(sources) == 0:
         return np.full(num_nodes, np.inf)
     return dijkstra(adjacency, indices=sources, unweighted=True, limit=limit, min_only=True)

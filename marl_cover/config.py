@@ -12,6 +12,8 @@ from marl_cover.graph import SpatialGraph
 #: the paper's 1266-waypoint graph, and its 5659-waypoint graph.
 MAP_PRESETS = ("city", "paper", "paper_full", "paper_large")
 INVALID_ACTION_MODES = ("noop", "raise")
+#: ``coverage``: the whole map is known; ``exploration``: robots discover it with a range sensor.
+TASKS = ("coverage", "exploration")
 RENDER_MODES = ("human", "rgb_array")
 
 T = TypeVar("T")
@@ -35,6 +37,10 @@ class CoverageConfig:
     """Configuration of :class:`marl_cover.env.CoverageEnv` (defaults: the paper's setting).
 
     Attributes:
+        task: ``"coverage"`` (the map is known from the start) or ``"exploration"`` (waypoints
+            become known within ``sensor_range`` of a robot; see :mod:`marl_cover.discovery`).
+        sensor_range: Exploration: range of each robot's sensor in metres (the paper's 22 m),
+            measured from its waypoint; at least the longest edge of the map.
         num_robots: Team size.
         max_steps: Actions per episode, T (the paper's code gave T - 1; we give T).
         hops: Radius K of each robot's ego-graph.
@@ -59,6 +65,8 @@ class CoverageConfig:
             ``"numpy"``), ``"numpy"`` or ``"numba"``; all give identical observations.
     """
 
+    task: str = "coverage"
+    sensor_range: float = 22.0
     num_robots: int = 4
     max_steps: int = 50
     hops: int = 19
@@ -78,6 +86,8 @@ class CoverageConfig:
 
     def __post_init__(self) -> None:
         checks = [
+            (self.task in TASKS, f"task must be one of {TASKS}, got {self.task!r}"),
+            (self.sensor_range > 0, f"sensor_range must be > 0 metres, got {self.sensor_range}"),
             (self.num_robots >= 1, f"num_robots must be >= 1, got {self.num_robots}"),
             (self.max_steps >= 1, f"max_steps must be >= 1, got {self.max_steps}"),
             (self.hops >= 1, f"hops must be >= 1, got {self.hops}"),

@@ -191,6 +191,10 @@ class QuadrotorCoverageEnv(CoverageEnv):
         **overrides: Any,
     ) -> None:
         super().__init__(config, **overrides)
+        if self.config.task != "coverage":
+            raise ValueError(
+                f"the quadrotor simulation runs task='coverage' only, got {self.config.task!r}"
+            )
         if isinstance(dynamics, dict):
             dynamics = DynamicsConfig.from_dict(dynamics)
         self.dynamics = dynamics or DynamicsConfig()

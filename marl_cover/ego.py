@@ -25,11 +25,15 @@ action edges of robot ``r`` at ``5 r + k`` (in) and ``5 R + 5 r + k`` (out).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from gymnasium import spaces
 
 from marl_cover.graph import SpatialGraph
+
+if TYPE_CHECKING:
+    from marl_cover.discovery import Discovery
 
 #: Columns of the node feature matrix.
 NODE_FEATURES = ("is_robot", "is_waypoint", "is_interest", "is_frontier")
@@ -147,6 +151,7 @@ def build_ego_graphs(
     hops: int,
     shape: PaddedShape,
     backend: str = "numpy",
+    neighbors: np.ndarray | None = None,
 ) -> dict[str, np.ndarray]:
     """Every robot's padded ego-graph, batched over robots.
 
@@ -160,6 +165,10 @@ def build_ego_graphs(
         waypoint_features: ``(num_nodes, 4)`` float32 features of the waypoints, C-contiguous.
         hops: Radius of the ego-graphs.
         shape: Padded sizes (from :func:`ego_shape`).
+        neighbors: The neighbour table to search, ``(N, 4)`` (default ``graph.neighbors``):
+            exploration passes the known graph's (:class:`marl_cover.discovery.Discovery`),
+            whose undiscovered waypoints are unreachable, so they never enter an ego-graph.
+            Every robot's moves must be in it.
 
     Returns:
         Freshly allocated arrays with a leading robot axis: ``nodes (R, M, 4)``,
@@ -168,7 +177,9 @@ def build_ego_graphs(
         ``action_mask (R, 5)`` int8.
     """
     if backend == "numba":
-        return _build_ego_graphs_numba(graph, robot_node, waypoint_features, hops, shape)
+        return _build_ego_graphs_numba(graph, robot_node, waypoint_features, hops, shape, neighbors)
+    if neighbors is not None:  # the known graph as a graph of its own (same waypoint ids)
+        graph = SpatialGraph(graph.positions, neighbors, graph.cell_size)
     # Rows of features and positions move as single complex numbers (one 16- or 8-byte item),
     # and every scatter goes through a flat index: numpy's multi-axis fancy indexing is several
     # times slower at these sizes.
@@ -293,6 +304,7 @@ def _build_ego_graphs_numba(
     waypoint_features: np.ndarray,
     hops: int,
     shape: PaddedShape,
+    neighbors: np.ndarray | None,
 ) -> dict[str, np.ndarray]:
     from marl_cover._ego_numba import fill_ego_graphs
 
@@ -307,7 +319,7 @@ def _build_ego_graphs_numba(
         "action_mask": np.zeros((r, NUM_ACTIONS), dtype=np.int8),
     }
     status = fill_ego_graphs(
-        graph.neighbors,
+        graph.neighbors if neighbors is None else neighbors,
         graph.neighbor_distances,
         graph.float_cells,
         np.ascontiguousarray(waypoint_features, dtype=np.float32),
@@ -349,8 +361,20 @@ class StateBuilder:
         self._node_pos[r : r + n] = graph.positions / graph.cell_size
         self._node_mask = np.arange(m) < r + n
 
-    def build(self, robot_node: np.ndarray, waypoint_features: np.ndarray) -> dict[str, np.ndarray]:
+    def build(
+        self,
+        robot_node: np.ndarray,
+        waypoint_features: np.ndarray,
+        discovery: Discovery | None = None,
+    ) -> dict[str, np.ndarray]:
         """The state for robots on ``robot_node`` ``(R,)`` and waypoint features ``(N, 4)``.
+
+        Args:
+            robot_node: Waypoint of each robot, ``(R,)``.
+            waypoint_features: ``(N, 4)`` features of every waypoint.
+            discovery: Exploration: only the discovered waypoints, in discovery order, and the
+                known edges, in the order they became known (``None``: every waypoint, in map
+                order).
 
         Returns:
             Fresh arrays: ``nodes (M, 4)``, ``node_pos (M, 2)`` (cells, map frame),
@@ -362,29 +386,46 @@ class StateBuilder:
         sink = m - 1
         nodes = np.zeros((m, NUM_NODE_FEATURES), dtype=np.float32)
         nodes[:r] = ROBOT_FEATURE
-        nodes[r : r + graph.num_nodes] = waypoint_features
-        node_pos = self._node_pos.copy()
-        node_pos[:r] = node_pos[r + robot_node]
+        if discovery is None:
+            waypoint_id = np.arange(graph.num_nodes) + r  # (N,) node of each waypoint
+            nodes[r : r + graph.num_nodes] = waypoint_features
+            node_pos = self._node_pos.copy()
+            node_mask = self._node_mask.copy()
+            edge_index = self._edge_index.copy()
+            edge_attr = self._edge_attr.copy()
+            edge_mask = self._edge_mask.copy()
+        else:
+            waypoint_id = discovery.rank + r
+            order, known = discovery.order, discovery.num_known_edges
+            nodes[r : r + len(order)] = waypoint_features[order]
+            node_pos = np.zeros((m, 2), dtype=np.float32)
+            node_pos[r : r + len(order)] = graph.float_cells[order]
+            node_mask = np.arange(m) < r + len(order)
+            first = 2 * NUM_ACTIONS * r
+            edge_index = np.full((2, self.shape.max_edges), sink, dtype=np.int64)
+            edge_index[:, first : first + known] = discovery.edge_index + r
+            edge_attr = np.zeros((self.shape.max_edges, 1), dtype=np.float32)
+            edge_attr[first : first + known, 0] = discovery.edge_length
+            edge_mask = np.zeros(self.shape.max_edges, dtype=bool)
+            edge_mask[first : first + known] = True
+        node_pos[:r] = graph.float_cells[robot_node]
 
         targets = action_targets(graph, robot_node)  # (R, 5)
         action_mask = targets >= 0
-        target_ids = np.where(action_mask, targets + r, sink).ravel()
+        target_ids = np.where(action_mask, waypoint_id[targets.clip(min=0)], sink).ravel()
         robot_ids = np.where(action_mask, np.arange(r)[:, None], sink).ravel()
-        edge_index = self._edge_index.copy()
         k = NUM_ACTIONS * r
         edge_index[0, :k], edge_index[1, :k] = target_ids, robot_ids
         edge_index[0, k : 2 * k], edge_index[1, k : 2 * k] = robot_ids, target_ids
-        edge_attr = self._edge_attr.copy()
         distances = _action_distances(graph, robot_node).ravel()
         edge_attr[:k, 0] = distances
         edge_attr[k : 2 * k, 0] = distances
-        edge_mask = self._edge_mask.copy()
         edge_mask[:k] = action_mask.ravel()
         edge_mask[k : 2 * k] = action_mask.ravel()
         return {
             "nodes": nodes,
             "node_pos": node_pos,
-            "node_mask": self._node_mask.copy(),
+            "node_mask": node_mask,
             "edge_index": edge_index,
             "edge_attr": edge_attr,
             "edge_mask": edge_mask,

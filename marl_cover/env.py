@@ -1,14 +1,23 @@
-"""Multi-robot coverage on a spatial graph, as a PettingZoo parallel environment.
+"""Multi-robot coverage and exploration on a spatial graph, as a PettingZoo parallel env.
 
 A team of robots moves on a lattice of waypoints (5 m apart, 4-connected). Half of the
 waypoints, drawn at each reset, are points of interest; the team earns +1 for each point of
 interest that a robot visits for the first time. Each robot sees only its K-hop ego-graph.
 
+Tasks (``task=``, one environment class): in ``"coverage"`` the whole map is known from the
+start. In ``"exploration"`` a waypoint becomes known when it is within ``sensor_range`` metres
+(default 22 m) of a robot's waypoint, at reset or after a step; knowledge is shared and
+cumulative (:mod:`marl_cover.discovery`). Ego-graphs are then searched on the known graph only,
+``state()`` holds only discovered waypoints (in discovery order) and known edges, and
+``is_frontier`` marks discovered waypoints with an undiscovered neighbour. Rewards, moves and
+the random draws of an episode are the same in both tasks.
+
 ========================  ==================================================================
 Agents                    ``robot_0 ... robot_{num_robots-1}``
 Action space              ``Discrete(5)``: 0 stay, 1 east, 2 north, 3 west, 4 south
 Observation space         ``Dict`` of padded graph arrays (table below)
-State space               ``Dict``: the whole graph in the same encoding, plus ``robot_nodes``
+State space               ``Dict``: the whole (exploration: known) graph in the same encoding,
+                          plus ``robot_nodes``
 Reward                    Team reward: points of interest newly visited this step (all robots
                           get it); each robot's own count is ``infos[agent]["new_interest"]``
 Termination               Every point of interest has been visited
@@ -25,7 +34,8 @@ key             shape            dtype    meaning
 ==============  ===============  =======  ==================================================
 ``nodes``       ``(M, 4)``       float32  ``[is_robot, is_waypoint, is_interest,
                                           is_frontier]``; ``is_interest`` = unvisited point
-                                          of interest; ``is_frontier`` is 0 in coverage.
+                                          of interest; ``is_frontier``: discovered with an
+                                          undiscovered neighbour (always 0 in coverage).
                                           Node 0 is the ego robot (no ego-only feature)
 ``node_pos``    ``(M, 2)``       float32  position in cells relative to the ego robot
                                           (+x east, +y north); 0 for padding
@@ -79,6 +89,7 @@ from pettingzoo.utils.conversions import parallel_to_aec
 
 from marl_cover.collisions import resolve_collisions
 from marl_cover.config import CoverageConfig
+from marl_cover.discovery import Discovery, frontier_of, known_neighbors, sensor_footprints
 from marl_cover.ego import (
     NUM_ACTIONS,
     StateBuilder,
@@ -137,6 +148,8 @@ class CoverageSnapshot:
         num_steps: Actions taken so far.
         max_steps: Actions per episode.
         hops: Ego-graph radius.
+        discovered: Waypoints known to the team, ``(num_nodes,)`` bool (all of them in
+            coverage).
     """
 
     graph: SpatialGraph
@@ -146,11 +159,31 @@ class CoverageSnapshot:
     num_steps: int
     max_steps: int
     hops: int
+    discovered: np.ndarray
 
     @property
     def unvisited_interest(self) -> np.ndarray:
         """Points of interest not visited yet, ``(num_nodes,)`` bool."""
         return self.interest & ~self.visited
+
+    @property
+    def frontier(self) -> np.ndarray:
+        """Discovered waypoints with an undiscovered neighbour, ``(num_nodes,)`` bool."""
+        return frontier_of(self.graph, self.discovered)
+
+    def known(self) -> CoverageSnapshot:
+        """The snapshot as the team knows it (what a fair planner may use): the known graph,
+        where undiscovered waypoints keep their indices but have no edges, and the points of
+        interest among the discovered waypoints."""
+        if self.discovered.all():
+            return self
+        graph = SpatialGraph(
+            self.graph.positions,
+            known_neighbors(self.graph, self.discovered),
+            self.graph.cell_size,
+            self.graph.cells,
+        )
+        return dataclasses.replace(self, graph=graph, interest=self.interest & self.discovered)
 
 
 class CoverageEnv(ParallelEnv):
@@ -204,6 +237,8 @@ class CoverageEnv(ParallelEnv):
         self._rng: np.random.Generator | None = None
         self._graph: SpatialGraph | None = None
         self._state_builder: StateBuilder | None = None
+        self._footprint: Any = None  # exploration: sensor footprints of self._graph
+        self._discovery: Discovery | None = None
         self._renderer: Any = None
 
     # ------------------------------------------------------------------ spaces
@@ -253,11 +288,14 @@ class CoverageEnv(ParallelEnv):
         if graph is not self._graph:
             self._graph = graph
             self._state_builder = StateBuilder(graph, self.config.num_robots, self._state_shape)
+            self._footprint = self._sensor_footprints(graph)
         self._interest = self._draw_interest(graph, options.get("interest_nodes"))
         self._robot_node = self._draw_starts(graph, options.get("robot_nodes"))
         self._visited = np.zeros(graph.num_nodes, dtype=bool)
         self._visited[self._robot_node] = True
         self._waypoint_features = waypoint_features(self._interest & ~self._visited)
+        self._discovery = None if self._footprint is None else Discovery(graph, self._footprint)
+        self._sense()
         self._num_steps = 0
         self._credits = np.zeros(self.config.num_robots, dtype=np.int64)
         self._trails: list[np.ndarray] = [self._robot_node.copy()]
@@ -265,6 +303,26 @@ class CoverageEnv(ParallelEnv):
         zeros = np.zeros(self.config.num_robots, dtype=np.int64)
         infos = self._infos(zeros, zeros.astype(bool), zeros.astype(bool))
         return self._observe(), infos
+
+    def _sensor_footprints(self, graph: SpatialGraph) -> Any:
+        """Exploration: what a robot on each waypoint senses (``None`` in coverage)."""
+        if self.config.task != "exploration":
+            return None
+        longest = float(graph.neighbor_distances.max(initial=0.0)) * graph.cell_size
+        if self.config.sensor_range < longest:
+            raise ValueError(
+                f"sensor_range {self.config.sensor_range} m is shorter than the longest edge of "
+                f"the map ({longest:g} m): robots could move to waypoints they have not sensed"
+            )
+        return sensor_footprints(graph, self.config.sensor_range)
+
+    def _sense(self) -> None:
+        """Exploration: the robots sense around their waypoints; updates the known graph and
+        the frontier column of the waypoint features."""
+        if self._discovery is None:
+            return
+        changed = self._discovery.sense(self._robot_node)
+        self._waypoint_features[changed, 3] = self._discovery.frontier[changed]
 
     def _draw_interest(self, graph: SpatialGraph, given: Any) -> np.ndarray:
         interest = np.zeros(graph.num_nodes, dtype=bool)
@@ -405,6 +463,7 @@ class CoverageEnv(ParallelEnv):
         new_interest = self._mark_visited(next_node)
         self._robot_node = next_node
         self._trails.append(next_node.copy())
+        self._sense()
         return new_interest
 
     def _mark_visited(self, node: np.ndarray) -> np.ndarray:
@@ -460,12 +519,13 @@ class CoverageEnv(ParallelEnv):
             self.config.hops,
             self._ego_shape,
             self._ego_backend,
+            None if self._discovery is None else self._discovery.neighbors,
         )
 
     def state(self) -> dict[str, np.ndarray]:
         """The whole graph in the observation encoding (see the module docstring)."""
         self._require_episode()
-        return self._state_builder.build(self._robot_node, self._waypoint_features)
+        return self._state_builder.build(self._robot_node, self._waypoint_features, self._discovery)
 
     def snapshot(self) -> CoverageSnapshot:
         """A read-only copy of the episode's state for planners."""
@@ -478,7 +538,14 @@ class CoverageEnv(ParallelEnv):
             num_steps=self._num_steps,
             max_steps=self.config.max_steps,
             hops=self.config.hops,
+            discovered=self._discovered(),
         )
+
+    def _discovered(self) -> np.ndarray:
+        """Waypoints known to the team, ``(N,)`` bool (a copy; all of them in coverage)."""
+        if self._discovery is None:
+            return np.ones(self._graph.num_nodes, dtype=bool)
+        return self._discovery.discovered.copy()
 
     def _require_episode(self) -> None:
         if self._graph is None:
@@ -505,9 +572,16 @@ class CoverageEnv(ParallelEnv):
             self._visited,
             np.stack(self._trails),
             title=f"{self._progress_text()}   "
-            f"covered {int((self._interest & self._visited).sum())}/{int(self._interest.sum())}",
+            f"covered {int((self._interest & self._visited).sum())}/{int(self._interest.sum())}"
+            + self._discovery_text(),
             robot_xy=self._robot_xy(),
+            discovered=None if self._discovery is None else self._discovery.discovered,
         )
+
+    def _discovery_text(self) -> str:
+        if self._discovery is None:
+            return ""
+        return f"   discovered {self._discovery.num_discovered}/{self._graph.num_nodes}"
 
     def _progress_text(self) -> str:
         return f"step {self._num_steps}/{self.config.max_steps}"

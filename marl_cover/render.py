@@ -30,8 +30,11 @@ def draw_map(
     trails: np.ndarray | None = None,
     robot_xy: np.ndarray | None = None,
     trail_xy: np.ndarray | None = None,
+    discovered: np.ndarray | None = None,
 ) -> None:
     """Draws waypoints, points of interest (orange, green once covered), trails and robots.
+
+    In exploration (``discovered`` given) what the team has not discovered is drawn faded.
 
     Args:
         ax: A matplotlib ``Axes``.
@@ -43,19 +46,29 @@ def draw_map(
         robot_xy: ``(R, 2)`` robot positions in metres (robots off the waypoints); overrides
             ``robot_node``.
         trail_xy: ``(T, R, 2)`` past positions in metres; overrides ``trails``.
+        discovered: ``(N,)`` bool, waypoints known to the team (``None``: all).
     """
     import matplotlib.pyplot as plt
 
     pos = graph.positions
     senders, receivers = graph.edge_index
-    keep = senders < receivers
-    segments = np.stack([pos[senders[keep]], pos[receivers[keep]]], axis=1)
     from matplotlib.collections import LineCollection
 
-    ax.add_collection(LineCollection(segments, colors=WAYPOINT_COLOUR, linewidths=0.5, zorder=0))
+    known = np.ones(graph.num_nodes, dtype=bool) if discovered is None else discovered
+    known_edge = known[senders] & known[receivers]
     size = max(2.0, 4000.0 / max(graph.num_nodes, 1))
-    ax.scatter(*pos[~interest].T, s=size * 0.3, c=WAYPOINT_COLOUR, zorder=1)
-    ax.scatter(*pos[interest & ~visited].T, s=size, c=INTEREST_COLOUR, zorder=2)
+    for nodes, edges, alpha in ((known, known_edge, 1.0), (~known, ~known_edge, 0.2)):
+        keep = edges & (senders < receivers)
+        segments = np.stack([pos[senders[keep]], pos[receivers[keep]]], axis=1)
+        ax.add_collection(
+            LineCollection(segments, colors=WAYPOINT_COLOUR, linewidths=0.5, alpha=alpha, zorder=0)
+        )
+        ax.scatter(
+            *pos[nodes & ~interest].T, s=size * 0.3, c=WAYPOINT_COLOUR, alpha=alpha, zorder=1
+        )
+        ax.scatter(
+            *pos[nodes & interest & ~visited].T, s=size, c=INTEREST_COLOUR, alpha=alpha, zorder=2
+        )
     ax.scatter(*pos[interest & visited].T, s=size, c=COVERED_COLOUR, alpha=0.5, zorder=2)
     colours = plt.get_cmap("tab10")(np.arange(len(robot_node)) % 10)
     if trail_xy is None and trails is not None:
@@ -96,13 +109,23 @@ class Renderer:
         trails: np.ndarray,
         title: str = "",
         robot_xy: np.ndarray | None = None,
+        discovered: np.ndarray | None = None,
     ) -> np.ndarray | None:
         """Redraws the episode; returns the pixels in ``"rgb_array"`` mode.
 
         ``robot_xy`` ``(R, 2)`` draws the robots at these positions (robots between waypoints).
         """
         self.ax.clear()
-        draw_map(self.ax, graph, robot_node, interest, visited, trails, robot_xy=robot_xy)
+        draw_map(
+            self.ax,
+            graph,
+            robot_node,
+            interest,
+            visited,
+            trails,
+            robot_xy=robot_xy,
+            discovered=discovered,
+        )
         self.ax.set_title(title)
         if self.mode == "rgb_array":
             return figure_to_array(self.fig)

@@ -1,8 +1,9 @@
 """Environment throughput: env steps/s and agent-steps/s with every robot's observation built.
 
 PettingZoo cases: (a) 4 robots on windows of the paper's map, K = 19; (b) 100 robots on the
-paper's 5659-waypoint map, K = 19; (c) the default procedural city. Random valid actions; resets
-(new windows and cities) are included in the timing.
+paper's 5659-waypoint map, K = 19; (c) the default procedural city; (f) and (g): cases a and b
+on the exploration task (22 m sensor; discovery, the known graph and the frontier updated every
+step). Random actions; resets (new windows and cities) are included in the timing.
 
 TorchRL collection (case a's task, every robot's ego-graph and the state in every frame, random
 actions from the action spec, a TorchRL ``Collector``): (d) the batched environment
@@ -33,8 +34,20 @@ CASES = {
     "a: paper windows, 4 robots, K=19": {"map": "paper", "num_robots": 4, "hops": 19},
     "b: paper 5659 map, 100 robots, K=19": {"map": "paper_large", "num_robots": 100, "hops": 19},
     "c: procedural city (defaults)": {},
+    "f: exploration, paper windows, 4 robots": {
+        "task": "exploration",
+        "map": "paper",
+        "num_robots": 4,
+        "hops": 19,
+    },
+    "g: exploration, 5659 map, 100 robots": {
+        "task": "exploration",
+        "map": "paper_large",
+        "num_robots": 100,
+        "hops": 19,
+    },
 }
-TARGETS = {"a": 5000.0, "b": 100.0, "d": 2000.0}
+TARGETS = {"a": 5000.0, "b": 100.0, "d": 2000.0, "f": 3000.0, "g": 60.0}
 COLLECTION = {"map": "paper", "num_robots": 4, "hops": 19}
 
 

@@ -2,7 +2,12 @@
 
 Prints a comparison table (paired episodes) and writes an animation of one GNN episode.
 
-    python scripts/demo.py [--episodes 10] [--robots 4] [--city-size 228] [--out outputs/demo]
+    python scripts/demo.py [--task coverage|exploration] [--episodes 10] [--robots 4]
+                           [--city-size 228] [--out outputs/demo]
+
+In exploration the map is discovered with a 22 m sensor (undiscovered parts are faded in the
+animation); the expert runs twice: omniscient (plans on the true map, the imitation teacher)
+and fair (plans only on what the team has discovered).
 
 The GNN was trained on windows of the paper's map; procedural cities are maps it never saw.
 Without the ``train`` extra (torch) or the ``expert`` extra (PyVRP) those rows are skipped.
@@ -22,8 +27,8 @@ from agents.greedy import GreedyPolicy  # noqa: E402
 from marl_cover import parallel_env  # noqa: E402
 
 
-def load_gnn() -> Any:
-    """The shipped coverage model, or ``None`` without torch."""
+def load_gnn(task: str) -> Any:
+    """The shipped model of ``task``, or ``None`` without torch."""
     try:
         import torch
     except ImportError:
@@ -33,11 +38,11 @@ def load_gnn() -> Any:
     from agents.models.shipped import shipped_model_path
 
     torch.set_num_threads(1)
-    model, _ = load_model(shipped_model_path("coverage"))
+    model, _ = load_model(shipped_model_path(task))
     return model
 
 
-def make_policies(model: Any, hops: int, expert_iterations: int) -> dict[str, Any]:
+def make_policies(model: Any, hops: int, expert_iterations: int, task: str) -> dict[str, Any]:
     policies: dict[str, Any] = {}
     if model is not None:
         from agents.models.policy import GNNPolicy
@@ -48,8 +53,12 @@ def make_policies(model: Any, hops: int, expert_iterations: int) -> dict[str, An
         from agents.experts import RoutingExpert
 
         # iteration-limited solves: the same table on every machine
-        name = f"expert (PyVRP open loop, {expert_iterations} it.)"
-        policies[name] = RoutingExpert(max_iterations=expert_iterations)
+        kinds = {"full": ""} if task == "coverage" else {"full": "omniscient, ", "known": "fair, "}
+        for information, label in kinds.items():
+            name = f"expert ({label}PyVRP open loop, {expert_iterations} it.)"
+            policies[name] = RoutingExpert(
+                max_iterations=expert_iterations, information=information
+            )
     except ImportError:
         print("PyVRP is not installed (the expert extra): no expert row")
     return policies
@@ -78,6 +87,7 @@ def animate(env_kwargs: dict[str, Any], policy: Any, seed: int, path: Path) -> N
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--task", choices=["coverage", "exploration"], default="coverage")
     parser.add_argument("--episodes", type=int, default=10)
     parser.add_argument("--robots", type=int, default=4)
     parser.add_argument("--city-size", type=int, default=228)
@@ -87,26 +97,32 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=1000, help="first city seed")
     parser.add_argument("--out", type=Path, default=Path("outputs/demo"))
     args = parser.parse_args()
-    model = load_gnn()
+    model = load_gnn(args.task)
     hops = model.config.hops if model is not None else 19
-    env_kwargs = {"num_robots": args.robots, "hops": hops, "city_size": args.city_size}
+    env_kwargs = {
+        "task": args.task,
+        "num_robots": args.robots,
+        "hops": hops,
+        "city_size": args.city_size,
+    }
     env = parallel_env(**env_kwargs)
     seeds = range(args.seed, args.seed + args.episodes)
     print(
-        f"{args.robots} robots, K = {hops}, T = {env.config.max_steps}, {args.episodes} fresh "
-        f"procedural cities of {args.city_size} waypoints (seeds {seeds.start}..{seeds.stop - 1})"
+        f"{args.task}: {args.robots} robots, K = {hops}, T = {env.config.max_steps}, "
+        f"{args.episodes} fresh procedural cities of {args.city_size} waypoints "
+        f"(seeds {seeds.start}..{seeds.stop - 1})"
     )
-    print(f"{'policy':<40} {'reward':>15} {'coverage':>9} {'policy ms/step':>15}")
-    for name, policy in make_policies(model, hops, args.expert_iterations).items():
+    print(f"{'policy':<48} {'reward':>15} {'coverage':>9} {'policy ms/step':>15}")
+    for name, policy in make_policies(model, hops, args.expert_iterations, args.task).items():
         s = evaluate(env, policy, seeds)
         print(
-            f"{name:<40} {s.mean:7.1f} +- {s.sem:4.1f} {100 * s.mean_coverage:8.1f}% "
+            f"{name:<48} {s.mean:7.1f} +- {s.sem:4.1f} {100 * s.mean_coverage:8.1f}% "
             f"{s.controller_ms_per_step:15.2f}"
         )
     if model is not None:
         from agents.models.policy import GNNPolicy
 
-        path = args.out / "gnn_city.gif"
+        path = args.out / ("gnn_city.gif" if args.task == "coverage" else "gnn_city_explore.gif")
         animate(env_kwargs, GNNPolicy(model), seeds.start, path)
         print(f"wrote {path}")
 

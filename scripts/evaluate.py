@@ -4,10 +4,15 @@
         map=paper out=results.json
     python scripts/evaluate.py policy=expert expert.backend=ortools expert.time_limit=1.0
     python scripts/evaluate.py policy=expert_rh hops=19 expert.time_limit=0.15
+    python scripts/evaluate.py task=exploration policy=expert_rh expert.information=known map=paper
     python scripts/evaluate.py policy=gnn map=paper                 # the shipped model
     python scripts/evaluate.py policy=gnn checkpoint=outputs/bc/nonlinear_k19/best.pt \
         map=paper_large num_robots=100 gnn.centralized=true
 
+Tasks: ``coverage`` or ``exploration`` (the map is discovered with a range sensor,
+``sensor_range=22``); ``task`` also picks the shipped model. In exploration the experts are
+omniscient by default (``expert.information=full``, the imitation teacher) or fair
+(``expert.information=known``: only what the team has discovered).
 Policies: ``greedy`` (each robot on its ego-graph), ``greedy_central`` (same actions, from
 ``state()``), ``expert`` (open-loop routing), ``expert_rh`` (receding horizon over ``hops``),
 ``gnn`` (the shipped model of the task, or ``checkpoint=PATH``; each robot on its own ego-graph,
@@ -34,6 +39,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from agents.cli import parse_value, write_text_atomic  # noqa: E402
 from agents.evaluation import evaluate  # noqa: E402
 from marl_cover import CoverageConfig, parallel_env  # noqa: E402
+from marl_cover.config import TASKS  # noqa: E402
 
 POLICIES = ("greedy", "greedy_central", "expert", "expert_rh", "gnn")
 
@@ -44,6 +50,7 @@ class ExpertOptions:
     time_limit: float = 0.9
     seed: int = 0
     warm_start: bool = True
+    information: str = "full"
 
 
 @dataclass
@@ -91,7 +98,7 @@ def parse_overrides(
             setattr(options_of_section, name, value)
         elif key in {f.name for f in fields(EvaluateOptions)}:
             setattr(options, key, value if key not in ("out", "checkpoint") else text)
-        elif key in env_keys:
+        elif key in env_keys and key != "task":
             env[key] = value if key != "map" else text
         else:
             raise SystemExit(
@@ -99,8 +106,9 @@ def parse_overrides(
                 f"{sorted(f.name for f in fields(EvaluateOptions))}, environment "
                 f"keys {sorted(env_keys)}, expert.* and gnn.*"
             )
-    if options.task != "coverage":
-        raise SystemExit(f"task {options.task!r} is not available yet; tasks: ['coverage']")
+    if options.task not in TASKS:
+        raise SystemExit(f"unknown task {options.task!r}; tasks: {list(TASKS)}")
+    env["task"] = options.task
     if options.policy not in POLICIES:
         raise SystemExit(f"unknown policy {options.policy!r}; policies: {list(POLICIES)}")
     return options, expert, gnn, env
@@ -151,6 +159,7 @@ def make_policy(
         time_limit=expert.time_limit,
         seed=expert.seed,
         warm_start=expert.warm_start,
+        information=expert.information,
     )
 
 

@@ -6,8 +6,9 @@ as each robot on its own ego-graph, tested). Greedy runs on each robot's ego-gra
 paired across methods. Each (method, team size) result is written to
 ``OUT/<method>_R<robots>.json`` when done and skipped when present (resumable).
 
-    python scripts/generalize.py [--robots 10 20 30 40 50 100] [--episodes 100]
-        [--checkpoint agents/models/shipped/coverage_gnn.pt] [--out outputs/generalize]
+    python scripts/generalize.py [--task coverage|exploration] [--robots 10 20 30 40 50 100]
+        [--episodes 100] [--checkpoint agents/models/shipped/<task>_gnn.pt]
+        [--out outputs/generalize]
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from agents.evaluation import evaluate  # noqa: E402
 from agents.greedy import GreedyPolicy  # noqa: E402
 from agents.paper import paper_numbers  # noqa: E402
 from marl_cover import parallel_env  # noqa: E402
+from marl_cover.config import TASKS  # noqa: E402
 
 TEAMS = [10, 20, 30, 40, 50, 100]
 PAPER_METHODS = {"greedy": "greedy", "gnn": "gnn_nonlinear_bc"}
@@ -31,7 +33,9 @@ PAPER_METHODS = {"greedy": "greedy", "gnn": "gnn_nonlinear_bc"}
 
 def run(method: str, robots: int, args: argparse.Namespace, model) -> dict:  # noqa: ANN001
     hops = model.config.hops
-    env = parallel_env(map="paper_large", num_robots=robots, hops=hops, max_steps=50)
+    env = parallel_env(
+        map="paper_large", num_robots=robots, hops=hops, max_steps=50, task=args.task
+    )
     if method == "gnn":
         from agents.models.policy import GNNPolicy
 
@@ -42,6 +46,7 @@ def run(method: str, robots: int, args: argparse.Namespace, model) -> dict:  # n
     summary = evaluate(env, policy, seeds)
     return {
         "method": method,
+        "task": args.task,
         "robots": robots,
         "hops": hops,
         "episodes": args.episodes,
@@ -62,6 +67,7 @@ def main() -> None:
     from agents.models.shipped import shipped_model_path
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--task", choices=TASKS, default="coverage")
     parser.add_argument("--robots", nargs="+", type=int, default=TEAMS)
     parser.add_argument("--episodes", type=int, default=100)
     parser.add_argument("--seed", type=int, default=0)
@@ -73,7 +79,7 @@ def main() -> None:
     parser.add_argument("--table-only", action="store_true")
     args = parser.parse_args()
     torch.set_num_threads(1)
-    args.checkpoint = args.checkpoint or shipped_model_path("coverage")
+    args.checkpoint = args.checkpoint or shipped_model_path(args.task)
     model, _ = load_model(args.checkpoint)
     if not args.table_only:
         for robots in args.robots:
@@ -86,7 +92,7 @@ def main() -> None:
         (r["method"], r["robots"]): r
         for r in (json.loads(p.read_text()) for p in sorted(args.out.glob("*_R*.json")))
     }
-    paper = paper_numbers("coverage_generalize_5659")
+    paper = paper_numbers(f"{args.task}_generalize_5659")
     print(
         f"{'R':>4} {'greedy ours':>16} {'GNN ours':>16} {'ratio (paired)':>18} "
         f"{'greedy paper':>16} {'GNN paper':>16}"
@@ -107,11 +113,11 @@ def main() -> None:
             f"{robots:>4} {cells[0]:>16} {cells[1]:>16} {ratio:>18} {cells[2]:>16} {cells[3]:>16}"
         )
     if records:
-        plot(records, paper, args.out / "generalize.png")
+        plot(records, paper, args.out / "generalize.png", args.task)
         print(f"wrote {args.out / 'generalize.png'}")
 
 
-def plot(records: dict, paper: dict, path: Path) -> None:
+def plot(records: dict, paper: dict, path: Path, task: str) -> None:
     """Mean +- SEM against team size, ours (solid) and the paper's (dashed)."""
     import matplotlib
 
@@ -131,7 +137,7 @@ def plot(records: dict, paper: dict, path: Path) -> None:
             ax.errorbar(x, y, yerr=e, fmt="^--", color=colour, alpha=0.5, capsize=3, label=label)
     ax.set_xlabel("robots")
     ax.set_ylabel("points of interest visited in 50 steps (mean +- SEM)")
-    ax.set_title("Coverage on the 5659-waypoint map, K = 19")
+    ax.set_title(f"{task.capitalize()} on the 5659-waypoint map, K = 19")
     ax.legend(fontsize=8)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)

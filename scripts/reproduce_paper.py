@@ -1,4 +1,5 @@
-"""The paper's Fig. "coverage" sweeps: greedy, the receding-horizon expert and the GNNs against K.
+"""The paper's sweeps (Figs. "coverage", "exploration"): greedy, the receding-horizon expert and
+the GNNs against K.
 
 Runs each method for K = 3, 5, ..., 19 on 100 seeded windows of the paper's map (4 robots,
 T = 50; greedy also with T = 49, what the paper's code ran), prints mean +- SEM beside
@@ -9,9 +10,11 @@ argmax), as trained by ``scripts/train_bc.py``.
 Each (method, K) result is written to ``OUT/<method>_K<k>.json`` as soon as it is done and is
 skipped when present, so the sweep resumes after an interrupt and can be split over processes
 (``--hops 3 5 7`` in one, ``--hops 9 11`` in another); ``--table-only`` prints and plots what
-is there.
+is there. ``--task exploration`` runs the exploration task (22 m sensor); there the expert is
+the fair one (it plans only on what the team has discovered, frontier included).
 
-    python scripts/reproduce_paper.py [--methods greedy expert_rh] [--hops 3 5 ... 19]
+    python scripts/reproduce_paper.py [--task coverage|exploration] [--methods greedy expert_rh]
+        [--hops 3 5 ... 19]
         [--episodes 100] [--expert-time-limit 0.15] [--backend pyvrp] [--out outputs/paper]
     python scripts/reproduce_paper.py --methods gnn_linear gnn_nonlinear --models outputs/bc
 """
@@ -30,6 +33,7 @@ from agents.evaluation import evaluate  # noqa: E402
 from agents.greedy import GreedyPolicy  # noqa: E402
 from agents.paper import paper_numbers  # noqa: E402
 from marl_cover import parallel_env  # noqa: E402
+from marl_cover.config import TASKS  # noqa: E402
 
 HOPS = list(range(3, 20, 2))
 #: Our method names -> the paper's, and the episode lengths each is run with.
@@ -59,13 +63,23 @@ def make_policy(method: str, hops: int, args: argparse.Namespace):  # noqa: ANN2
     from agents.experts import RoutingExpert
 
     return RoutingExpert(
-        backend=args.backend, mode="receding", horizon=hops, time_limit=args.expert_time_limit
+        backend=args.backend,
+        mode="receding",
+        horizon=hops,
+        time_limit=args.expert_time_limit,
+        information="known" if args.task == "exploration" else "full",
     )
 
 
 def run(method: str, hops: int, args: argparse.Namespace) -> dict:
     seeds = range(args.seed, args.seed + args.episodes)
-    record: dict = {"method": method, "hops": hops, "episodes": args.episodes, "seed": args.seed}
+    record: dict = {
+        "task": args.task,
+        "method": method,
+        "hops": hops,
+        "episodes": args.episodes,
+        "seed": args.seed,
+    }
     if method == "expert_rh":
         record["expert"] = {"backend": args.backend, "time_limit": args.expert_time_limit}
     if method.startswith("gnn_"):
@@ -74,7 +88,7 @@ def run(method: str, hops: int, args: argparse.Namespace) -> dict:
         _, metadata = load_model(model_path(method, hops, args))
         record["model"] = {"path": str(model_path(method, hops, args)), **metadata}
     for steps in METHODS[method][1]:
-        env = parallel_env(map="paper", hops=hops, max_steps=steps)
+        env = parallel_env(map="paper", hops=hops, max_steps=steps, task=args.task)
         summary = evaluate(env, make_policy(method, hops, args), seeds)
         record[f"T{steps}"] = {
             "mean": summary.mean,
@@ -88,6 +102,7 @@ def run(method: str, hops: int, args: argparse.Namespace) -> dict:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--task", choices=TASKS, default="coverage")
     parser.add_argument("--methods", nargs="+", default=list(METHODS), choices=list(METHODS))
     parser.add_argument("--hops", nargs="+", type=int, default=HOPS)
     parser.add_argument("--episodes", type=int, default=100)
@@ -110,14 +125,15 @@ def main() -> None:
                 write_text_atomic(path, json.dumps(run(method, hops, args), indent=2))
                 print(f"done {method} K={hops}", flush=True)
     records = [json.loads(p.read_text()) for p in sorted(args.out.glob("*_K*.json"))]
-    print_table(records)
+    records = [r for r in records if r.get("task", "coverage") == args.task]
+    print_table(records, args.task)
     if records:
-        plot(records, args.out / "coverage.png")
-        print(f"wrote {args.out / 'coverage.png'}")
+        plot(records, args.out / f"{args.task}.png", args.task)
+        print(f"wrote {args.out / f'{args.task}.png'}")
 
 
-def print_table(records: list[dict]) -> None:
-    paper = paper_numbers("coverage")
+def print_table(records: list[dict], task: str) -> None:
+    paper = paper_numbers(task)
     by_key = {(r["method"], r["hops"]): r for r in records}
     header = f"{'K':>3}"
     columns = []
@@ -138,13 +154,13 @@ def print_table(records: list[dict]) -> None:
         print(f"{hops:>3}" + "".join(f"{c:>20}" for c in cells))
 
 
-def plot(records: list[dict], path: Path) -> None:
+def plot(records: list[dict], path: Path, task: str) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    paper = paper_numbers("coverage")
+    paper = paper_numbers(task)
     fig, ax = plt.subplots(figsize=(7, 4.5), dpi=120)
     for colour, (method, (paper_name, lengths)) in zip("brgm", METHODS.items(), strict=False):
         points = sorted(
@@ -170,7 +186,7 @@ def plot(records: list[dict], path: Path) -> None:
             )
     ax.set_xlabel("receptive field / horizon K")
     ax.set_ylabel("episode reward (mean +- SEM)")
-    ax.set_title("Coverage, 4 robots, windows of the paper's map, T = 50")
+    ax.set_title(f"{task.capitalize()}, 4 robots, windows of the paper's map, T = 50")
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path)

@@ -45,12 +45,14 @@ def assert_same_transition(td, envs, returns) -> None:  # noqa: ANN001
             assert bool(td["done"][i]) == (terminated or truncated)
 
 
-@pytest.mark.parametrize("allow_swaps", [True, False])
-def test_same_transitions_as_pettingzoo(allow_swaps: bool) -> None:
+@pytest.mark.parametrize(
+    ("allow_swaps", "task"), [(True, "coverage"), (False, "coverage"), (True, "exploration")]
+)
+def test_same_transitions_as_pettingzoo(allow_swaps: bool, task: str) -> None:
     num_envs, seed = 3, 11
-    batched = BatchedCoverageEnv(num_envs, allow_swaps=allow_swaps, **CONFIG)
+    batched = BatchedCoverageEnv(num_envs, allow_swaps=allow_swaps, task=task, **CONFIG)
     batched.set_seed(seed)
-    envs = [parallel_env(allow_swaps=allow_swaps, **CONFIG) for _ in range(num_envs)]
+    envs = [parallel_env(allow_swaps=allow_swaps, task=task, **CONFIG) for _ in range(num_envs)]
     td = batched.reset()
     assert_same_transition(td, envs, {i: env.reset(seed=seed + i) for i, env in enumerate(envs)})
     rng = np.random.default_rng(0)
@@ -77,17 +79,18 @@ def test_same_transitions_as_pettingzoo(allow_swaps: bool) -> None:
     assert episodes_ended >= num_envs  # every sub-environment ended at least once
 
 
-def test_check_env_specs_and_collector() -> None:
+@pytest.mark.parametrize("task", ["coverage", "exploration"])
+def test_check_env_specs_and_collector(task: str) -> None:
     from torchrl.collectors import Collector
 
-    env = BatchedCoverageEnv(2, **CONFIG)
+    env = BatchedCoverageEnv(2, task=task, **CONFIG)
     env.set_seed(0)
     check_env_specs(env)
     collector = Collector(env, None, frames_per_batch=40, total_frames=80, return_same_td=True)
     batches = [batch["next", "robot", "reward"].sum().item() for batch in collector]
     collector.shutdown()
     assert len(batches) == 2
-    lean = BatchedCoverageEnv(2, observe_robots=False, **CONFIG)
+    lean = BatchedCoverageEnv(2, observe_robots=False, task=task, **CONFIG)
     check_env_specs(lean)
     assert "observation" not in lean.reset()["robot"]
 

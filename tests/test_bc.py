@@ -47,21 +47,25 @@ def record(seeds: range, **env_overrides):  # noqa: ANN201
     return [record_episode(env, GreedyRecorder(env.config.hops), seed) for seed in seeds]
 
 
-def test_collated_batches_are_the_environment_states() -> None:
-    """One flat graph of sampled transitions gives each state's centralized logits."""
+@pytest.mark.parametrize("task", ["coverage", "exploration"])
+def test_collated_batches_are_the_environment_states(task: str) -> None:
+    """One flat graph of sampled transitions gives each state's centralized logits (in
+    exploration: of the discovered graph, rebuilt from the recorded positions)."""
     torch.manual_seed(0)
     model = AggregationGNN(GNNConfig(kind="nonlinear", hops=3))
-    episodes = record(range(3), num_robots=3)
+    episodes = record(range(3), num_robots=3, task=task)
     max_nodes = max(e.graph.num_nodes for e in episodes) + 5  # padding must not matter
     table = GraphTable([e.graph for e in episodes], max_nodes)
-    data = episode_transitions(episodes, max_nodes)
+    sensor = 22.0 if task == "exploration" else None
+    data = episode_transitions(episodes, max_nodes, sensor_range=sensor)
     assert len(data) == sum(e.num_steps for e in episodes)
     picks = torch.tensor([0, 5, 13, 30, 11])
     batch = data[picks]
     with torch.no_grad():
         *graph, action_edges = collate_states(batch, table)
         logits = action_logits(model, tuple(graph), action_edges)
-    env = marl_cover.parallel_env(**SMALL_ENV, num_robots=3)
+    env = marl_cover.parallel_env(**SMALL_ENV, num_robots=3, task=task)
+    shape = env._ego_shape
     offsets = np.cumsum([0] + [e.num_steps for e in episodes])
     for row, index in enumerate(picks.tolist()):
         episode_index = int(np.searchsorted(offsets, index, side="right") - 1)
@@ -70,6 +74,9 @@ def test_collated_batches_are_the_environment_states() -> None:
         for t in range(step):  # replay to the stored state
             env.step(dict(zip(env.possible_agents, episode.actions[t].tolist(), strict=True)))
         assert np.array_equal(env.snapshot().robot_node, episode.robot_node[step])
+        rebuilt = episode.observations(step, 3, shape, sensor_range=sensor)
+        for key, value in env.observe_batch().items():
+            np.testing.assert_array_equal(rebuilt[key], value, err_msg=key)
         state = {k: torch.as_tensor(v) for k, v in env.state().items()}
         with torch.no_grad():
             expected = centralized_logits(model, state)

@@ -21,8 +21,8 @@ def tensors(arrays: dict[str, np.ndarray]) -> dict[str, torch.Tensor]:
     return {k: torch.as_tensor(v) for k, v in arrays.items()}
 
 
-def random_states(hops: int, seed: int):
-    env = marl_cover.parallel_env(num_robots=6, hops=hops, city_size=200)
+def random_states(hops: int, seed: int, task: str = "coverage"):
+    env = marl_cover.parallel_env(num_robots=6, hops=hops, city_size=200, task=task)
     rng = np.random.default_rng(seed)
     env.reset(seed=seed)
     for _ in range(3):
@@ -54,6 +54,34 @@ def test_ego_graphs_give_the_logits_of_one_pass_over_the_state(kind: str, hops: 
             single = decentralized_logits(model.float(), tensors(env.observe_batch()))
         torch.testing.assert_close(single[mask].double(), central[mask], atol=1e-4, rtol=0)
         model.double()
+
+
+@pytest.mark.parametrize("kind", ["linear", "nonlinear"])
+def test_padded_batches_of_partial_ego_graphs_equal_one_at_a_time(kind: str) -> None:
+    """Exploration: a batch of ego-graphs of the known graph (different sizes, padded) gives
+    each robot the logits it gets alone and in one pass over the discovered ``state()``; no
+    padding or undiscovered waypoint leaks into a real node (the paper's phantom edges)."""
+    torch.manual_seed(7)
+    model = AggregationGNN(GNNConfig(kind=kind, hops=5)).double()
+
+    def double(arrays: dict[str, np.ndarray]) -> dict[str, torch.Tensor]:
+        return {k: v.double() if v.is_floating_point() else v for k, v in tensors(arrays).items()}
+
+    sizes = set()
+    for env in random_states(5, seed=2, task="exploration"):
+        batch = double(env.observe_batch())
+        sizes.update(batch["node_mask"].sum(dim=1).tolist())
+        mask = batch["action_mask"].bool()
+        with torch.no_grad():
+            together = decentralized_logits(model, batch)
+            central = centralized_logits(model, double(env.state()))
+            for i in range(len(mask)):
+                alone = decentralized_logits(model, {k: v[i : i + 1] for k, v in batch.items()})
+                torch.testing.assert_close(
+                    alone[0][mask[i]], together[i][mask[i]], atol=1e-10, rtol=0
+                )
+        torch.testing.assert_close(together[mask], central[mask], atol=1e-5, rtol=0)
+    assert len(sizes) > 3  # the ego-graphs really differ in size
 
 
 @pytest.mark.parametrize("kind", ["linear", "nonlinear"])

@@ -9,6 +9,15 @@ Modes:
 - ``"receding"``: plan every step over ``horizon`` steps (the paper's K) and take the first
   hop of each route.
 
+Information (exploration):
+
+- ``"full"`` (omniscient, the paper's teacher for imitation): plans on the true map with every
+  point of interest, discovered or not. In coverage this is the only kind.
+- ``"known"`` (fair): plans on what the team has discovered only
+  (:meth:`marl_cover.env.CoverageSnapshot.known`): the known graph, the discovered unvisited
+  points of interest, and one prize for each frontier waypoint (a discovered waypoint next to
+  undiscovered ones), so that routes also push into the unknown.
+
 Fallback (it never crashes an episode): a robot whose route is empty (nothing in reach, an
 empty, failed or infeasible solve) takes the greedy action toward the nearest unvisited point
 of interest within ``fallback_reach`` hops (default: anywhere; the expert knows the whole map,
@@ -24,6 +33,7 @@ from __future__ import annotations
 
 import time
 from collections import Counter
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -34,6 +44,7 @@ from marl_cover.env import CoverageSnapshot
 from marl_cover.graph import SpatialGraph
 
 MODES = ("open_loop", "receding")
+INFORMATION = ("full", "known")
 
 
 def step_toward(graph: SpatialGraph, robot_node: np.ndarray, goals: np.ndarray) -> np.ndarray:
@@ -81,6 +92,7 @@ class RoutingExpert:
         warm_start: Start each solve from the previous plan (receding horizon, re-plans).
         max_iterations: Stop each solve after this many iterations (PyVRP) or solutions
             (OR-Tools) instead of ``time_limit``: deterministic plans, for datasets.
+        information: ``"full"`` (omniscient) or ``"known"`` (only what the team discovered).
     """
 
     def __init__(
@@ -93,6 +105,7 @@ class RoutingExpert:
         max_iterations: int | None = None,
         warm_start: bool = True,
         fallback_reach: int | None = None,
+        information: str = "full",
     ) -> None:
         if backend not in BACKENDS:
             raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
@@ -100,6 +113,8 @@ class RoutingExpert:
             raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
         if mode == "receding" and (horizon is None or horizon < 1):
             raise ValueError("mode 'receding' needs a horizon >= 1")
+        if information not in INFORMATION:
+            raise ValueError(f"information must be one of {INFORMATION}, got {information!r}")
         if time_limit < 0:
             raise ValueError(f"time_limit must be >= 0, got {time_limit}")
         self.backend = backend
@@ -110,6 +125,7 @@ class RoutingExpert:
         self.max_iterations = max_iterations
         self.warm_start = warm_start
         self.fallback_reach = fallback_reach
+        self.information = information
         self.counts: Counter[str] = Counter()
         self.info: dict[str, Any] = {}
         self.reset()
@@ -186,6 +202,7 @@ class RoutingExpert:
                 decide asynchronously, as in :mod:`marl_cover.continuous`); the others are
                 expected to stay where the snapshot puts them. ``None``: every robot.
         """
+        snapshot = self.visible(snapshot)
         replanned = False
         if self._routes is not None:  # drop stops visited since (by anyone)
             self._routes = [[s for s in route if not snapshot.visited[s]] for route in self._routes]
@@ -210,6 +227,15 @@ class RoutingExpert:
             targets = np.where(active, targets, snapshot.robot_node)
         self._expected = targets
         return actions
+
+    def visible(self, snapshot: CoverageSnapshot) -> CoverageSnapshot:
+        """The snapshot the expert plans on: unchanged (``"full"``), or the known graph with the
+        discovered points of interest and the frontier as prizes (``"known"``)."""
+        if self.information == "full":
+            return snapshot
+        frontier = snapshot.frontier
+        known = snapshot.known()
+        return replace(known, interest=known.interest | frontier)
 
     def act_env(self, env: Any) -> dict[str, int]:
         """Actions keyed by agent name, from ``env.snapshot()``."""

@@ -269,18 +269,22 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
     dagger_shards = [out / "dagger" / SHARD_PATTERN.format(k) for k in range(config.dagger.rounds)]
     dagger_episodes = [read_shard(path) for path in dagger_shards if path.exists()]
     table = GraphTable([e.graph for e in train + val], max_nodes)
-    val_data = episode_transitions(val, max_nodes, first_index=len(train))
+    # exploration: transitions carry what the team had discovered (same sensor as the env)
+    sensor = env.config.sensor_range if env.config.task == "exploration" else None
+    val_data = episode_transitions(val, max_nodes, first_index=len(train), sensor_range=sensor)
     capacity = sum(e.num_steps for e in train) + config.dagger.rounds * config.dagger.episodes * (
         env.config.max_steps
     )
     buffer = make_buffer(capacity, config.batch_size)
-    buffer.extend(episode_transitions(train, max_nodes))
+    buffer.extend(episode_transitions(train, max_nodes, sensor_range=sensor))
 
     def add_dagger(episodes: list[Episode]) -> None:
         nonlocal table
         first = len(table)
         table = table.extended([e.graph for e in episodes])
-        buffer.extend(episode_transitions(episodes, max_nodes, first_index=first))
+        buffer.extend(
+            episode_transitions(episodes, max_nodes, first_index=first, sensor_range=sensor)
+        )
 
     for episodes in dagger_episodes:
         add_dagger(episodes)

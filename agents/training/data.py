@@ -2,7 +2,8 @@
 
 A transition is stored compactly (TensorDict fields, batch dim = transitions):
 ``episode`` (index into a per-episode graph table), ``robot_node (R,)``, ``interest (N_max,)``
-bool (unvisited points of interest before the action), ``action (R,)`` (the expert's label).
+bool (unvisited points of interest before the action), ``action (R,)`` (the expert's label),
+and in exploration ``discovered (N_max,)`` and ``frontier (N_max,)`` bool.
 The graph of each episode is stored once (``neighbors (N_max, 4)``, ``distances (N_max, 4)``).
 
 :func:`collate_states` turns a sampled batch into the whole-graph state encoding of
@@ -20,6 +21,7 @@ import torch
 from tensordict import TensorDict
 
 from agents.datasets import Episode
+from marl_cover.discovery import discovery_steps, frontier_of, sensor_footprints
 from marl_cover.ego import NUM_ACTIONS, NUM_NODE_FEATURES
 from marl_cover.graph import SpatialGraph
 
@@ -62,18 +64,39 @@ class GraphTable:
 
 
 def episode_transitions(
-    episodes: Iterable[Episode], max_nodes: int, first_index: int = 0
+    episodes: Iterable[Episode],
+    max_nodes: int,
+    first_index: int = 0,
+    sensor_range: float | None = None,
 ) -> TensorDict:
-    """Every step of ``episodes`` as transitions; episode ``i`` gets index ``first_index + i``."""
-    fields: dict[str, list[np.ndarray]] = {"episode": [], "robot_node": [], "interest": []}
+    """Every step of ``episodes`` as transitions; episode ``i`` gets index ``first_index + i``.
+
+    With ``sensor_range`` (exploration) each transition also holds what the team had
+    discovered and the frontier.
+    """
+    names = ["episode", "robot_node", "interest"]
+    if sensor_range is not None:
+        names += ["discovered", "frontier"]
+    fields: dict[str, list[np.ndarray]] = {name: [] for name in names}
     actions = []
     for i, episode in enumerate(episodes):
-        steps = episode.num_steps
-        visited = np.zeros(episode.graph.num_nodes, dtype=bool)
+        steps, n = episode.num_steps, episode.graph.num_nodes
+        visited = np.zeros(n, dtype=bool)
         interest = np.zeros((steps, max_nodes), dtype=bool)
         for t in range(steps):
             visited[episode.robot_node[t]] = True
-            interest[t, : episode.graph.num_nodes] = episode.interest & ~visited
+            interest[t, :n] = episode.interest & ~visited
+        if sensor_range is not None:
+            found = discovery_steps(
+                sensor_footprints(episode.graph, sensor_range), episode.robot_node
+            )
+            discovered = np.zeros((steps, max_nodes), dtype=bool)
+            frontier = np.zeros((steps, max_nodes), dtype=bool)
+            for t in range(steps):
+                discovered[t, :n] = found <= t
+                frontier[t, :n] = frontier_of(episode.graph, discovered[t, :n])
+            fields["discovered"].append(discovered)
+            fields["frontier"].append(frontier)
         fields["episode"].append(np.full(steps, first_index + i, dtype=np.int64))
         fields["robot_node"].append(episode.robot_node[:steps].astype(np.int64))
         fields["interest"].append(interest)
@@ -89,7 +112,10 @@ def collate_states(
     """One flat graph holding the state of every sampled transition.
 
     Args:
-        batch: Transitions with ``episode (B,)``, ``robot_node (B, R)``, ``interest (B, N)``.
+        batch: Transitions with ``episode (B,)``, ``robot_node (B, R)``, ``interest (B, N)``,
+            and in exploration ``discovered (B, N)`` and ``frontier (B, N)``: undiscovered
+            waypoints then have no features and no edges (isolated nodes change no robot's
+            logits, so this equals the env's ``state()`` of discovered waypoints only).
         table: The graphs the ``episode`` indices refer to.
 
     Returns:
@@ -102,14 +128,23 @@ def collate_states(
     per_sample = num_robots + n
     base = (torch.arange(num_samples) * per_sample).view(-1, 1)  # (B, 1)
 
+    known = "discovered" in batch
+    exists = torch.arange(n) < table.num_nodes[episode].view(-1, 1)  # (B, N)
+    if known:
+        exists = exists & batch["discovered"]
     nodes = torch.zeros(num_samples, per_sample, NUM_NODE_FEATURES)
     nodes[:, :num_robots, 0] = 1.0
-    nodes[:, num_robots:, 1] = (torch.arange(n) < table.num_nodes[episode].view(-1, 1)).float()
-    nodes[:, num_robots:, 2] = batch["interest"].float()
+    nodes[:, num_robots:, 1] = exists.float()
+    nodes[:, num_robots:, 2] = (batch["interest"] & exists).float()
+    if known:
+        nodes[:, num_robots:, 3] = batch["frontier"].float()
 
     neighbors = table.neighbors[episode]  # (B, N, 4)
     distances = table.distances[episode]  # (B, N, 4)
     waypoint_valid = neighbors >= 0
+    if known:  # only edges between two discovered waypoints
+        rows = torch.arange(num_samples).view(-1, 1, 1)
+        waypoint_valid &= exists.unsqueeze(-1) & exists[rows, neighbors.clamp(min=0)]
     owner = (base + num_robots + torch.arange(n).view(1, -1)).unsqueeze(-1).expand_as(neighbors)
     waypoint_senders = owner[waypoint_valid]
     waypoint_receivers = (base.unsqueeze(-1) + num_robots + neighbors)[waypoint_valid]
