@@ -1,4 +1,4 @@
-"""The shipped coverage model: its card, and golden rewards on fixed seeds."""
+"""The shipped models (coverage, exploration): their cards, and golden rewards on fixed seeds."""
 
 from __future__ import annotations
 
@@ -14,25 +14,31 @@ from agents.evaluation import evaluate  # noqa: E402
 from agents.models.policy import GNNPolicy, load_model  # noqa: E402
 from agents.models.shipped import SHIPPED, shipped_model_path  # noqa: E402
 
-#: Rewards of the shipped model (float64, argmax) on procedural cities, seeds 0..4, 4 robots.
-GOLDEN_CITY = [87.0, 90.0, 91.0, 99.0, 77.0]
+#: Rewards of each shipped model (float64, argmax) on procedural cities, seeds 0..4, 4 robots.
+GOLDEN_CITY = {
+    "coverage": [87.0, 90.0, 91.0, 99.0, 77.0],
+    "exploration": [80.0, 91.0, 92.0, 83.0, 87.0],
+}
 
 
-def test_the_shipped_model_has_a_card_that_names_its_origin() -> None:
-    model, metadata = load_model(shipped_model_path("coverage"))
-    card = json.loads((SHIPPED / "coverage_gnn.json").read_text())
+@pytest.mark.parametrize("task", list(GOLDEN_CITY))
+def test_the_shipped_model_has_a_card_that_names_its_origin(task: str) -> None:
+    model, metadata = load_model(shipped_model_path(task))
+    card = json.loads((SHIPPED / f"{task}_gnn.json").read_text())
     for key in ("command", "seed", "dataset", "config", "scores"):
         assert key in card, key
     assert card["config"]["model"]["hops"] == model.config.hops
     assert card["config"]["model"]["kind"] == model.config.kind
+    assert card["config"]["env"].get("task", "coverage") == task
     assert metadata["dataset"].endswith("coverage_expert")
     with pytest.raises(FileNotFoundError, match="exploration"):
         shipped_model_path("exploration_v9")
 
 
+@pytest.mark.parametrize("task", list(GOLDEN_CITY))
 @pytest.mark.parametrize("centralized", [False, True])
-def test_golden_rewards_of_the_shipped_model(centralized: bool) -> None:
-    model, _ = load_model(shipped_model_path("coverage"))
-    env = marl_cover.parallel_env(hops=model.config.hops)
+def test_golden_rewards_of_the_shipped_model(task: str, centralized: bool) -> None:
+    model, _ = load_model(shipped_model_path(task))
+    env = marl_cover.parallel_env(hops=model.config.hops, task=task)
     summary = evaluate(env, GNNPolicy(model.double(), centralized=centralized), range(5))
-    assert [r.reward for r in summary.results] == GOLDEN_CITY
+    assert [r.reward for r in summary.results] == GOLDEN_CITY[task]
