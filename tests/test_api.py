@@ -54,14 +54,15 @@ def test_max_cycles() -> None:
     max_cycles_test(importlib.import_module("marl_cover.env"))
 
 
-def test_torchrl_pettingzoo_wrapper_specs() -> None:
+@pytest.mark.parametrize("task", ["coverage", "exploration"])
+def test_torchrl_pettingzoo_wrapper_specs(task: str) -> None:
     torch = pytest.importorskip("torch")
     from torchrl.envs.libs.pettingzoo import PettingZooWrapper
     from torchrl.envs.utils import check_env_specs
 
     torch.manual_seed(0)
     wrapped = PettingZooWrapper(
-        marl_cover.parallel_env(**SMALL), return_state=False, use_mask=False, seed=0
+        marl_cover.parallel_env(task=task, **SMALL), return_state=False, use_mask=False, seed=0
     )
     check_env_specs(wrapped)
     rollout = wrapped.rollout(10)

@@ -11,7 +11,14 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def test_demo_prints_the_comparison_and_writes_a_gif(tmp_path) -> None:
+@pytest.mark.parametrize(
+    ("task", "experts", "gif"),
+    [
+        ("coverage", ["expert"], "gnn_city.gif"),
+        ("exploration", ["expert", "expert"], "gnn_city_explore.gif"),  # omniscient, fair
+    ],
+)
+def test_demo_prints_the_comparison_and_writes_a_gif(tmp_path, task, experts, gif) -> None:
     pytest.importorskip("torch")
     pytest.importorskip("pyvrp")
     pytest.importorskip("matplotlib")
@@ -19,6 +26,8 @@ def test_demo_prints_the_comparison_and_writes_a_gif(tmp_path) -> None:
         [
             sys.executable,
             str(ROOT / "scripts" / "demo.py"),
+            "--task",
+            task,
             "--episodes",
             "1",
             "--city-size",
@@ -38,7 +47,6 @@ def test_demo_prints_the_comparison_and_writes_a_gif(tmp_path) -> None:
     assert [row.split(",")[0].split(" (")[0] for row in rows] == [
         "GNN nonlinear",
         "greedy",
-        "expert",
+        *experts,
     ]
-    gif = tmp_path / "gnn_city.gif"
-    assert gif.read_bytes()[:6] == b"GIF89a"
+    assert (tmp_path / gif).read_bytes()[:6] == b"GIF89a"
