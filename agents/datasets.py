@@ -68,11 +68,11 @@ class Episode:
             - (self.interest[self.robot_node[0]]).sum()
         )
 
-    def discovered(self, step: int, sensor_range: float) -> np.ndarray:
-        """Exploration: waypoints the team knew before action ``step``, ``(N,)`` bool (the
-        recorded positions and the sensor range determine it)."""
-        footprint = sensor_footprints(self.graph, sensor_range)
-        return discovery_steps(footprint, self.robot_node[: step + 1]) <= step
+    def discovery_steps(self, sensor_range: float) -> np.ndarray:
+        """Exploration: when each waypoint became known, ``(N,)`` (the recorded positions and the
+        sensor range determine it); the team knew ``discovery_steps(...) <= t`` before action
+        ``t`` (see :func:`marl_cover.discovery.discovery_steps`)."""
+        return discovery_steps(sensor_footprints(self.graph, sensor_range), self.robot_node)
 
     def observations(
         self,
@@ -87,7 +87,7 @@ class Episode:
         features = waypoint_features(self.interest & ~self.visited(step))
         neighbors = None
         if sensor_range is not None:
-            discovered = self.discovered(step, sensor_range)
+            discovered = self.discovery_steps(sensor_range) <= step
             features[:, 3] = frontier_of(self.graph, discovered)
             neighbors = known_neighbors(self.graph, discovered)
         return build_ego_graphs(

@@ -144,6 +144,7 @@ class Discovery:
         if len(new) == 0:
             return new
         graph = self.graph
+        first_new = self.num_discovered  # rank of the first new waypoint
         self.discovered[new] = True
         self.rank[new] = self.num_discovered + np.arange(len(new))
         self._order[self.num_discovered : self.num_discovered + len(new)] = new
@@ -156,12 +157,11 @@ class Discovery:
         self.neighbors[v, slots] = u
         self.neighbors[u, OPPOSITE_SLOT[slots]] = v
         # v -> u for every new edge; u -> v too unless u is new (its own row adds it)
-        back = ~np.isin(u, new, assume_unique=False)
+        back = self.rank[u] < first_new
         senders = np.concatenate([v, u[back]])
         receivers = np.concatenate([u, v[back]])
-        lengths = np.concatenate(
-            [graph.neighbor_distances[v, slots], graph.neighbor_distances[v, slots][back]]
-        )
+        length = graph.neighbor_distances[v, slots]
+        lengths = np.concatenate([length, length[back]])
         k = self.num_known_edges
         self._edges[0, k : k + len(senders)] = self.rank[senders]
         self._edges[1, k : k + len(senders)] = self.rank[receivers]

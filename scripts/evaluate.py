@@ -98,7 +98,7 @@ def parse_overrides(
             setattr(options_of_section, name, value)
         elif key in {f.name for f in fields(EvaluateOptions)}:
             setattr(options, key, value if key not in ("out", "checkpoint") else text)
-        elif key in env_keys and key != "task":
+        elif key in env_keys:
             env[key] = value if key != "map" else text
         else:
             raise SystemExit(

@@ -12,7 +12,7 @@ from pettingzoo.test import parallel_api_test, parallel_seed_test
 
 import marl_cover
 from marl_cover.discovery import Discovery, frontier_of, known_neighbors, sensor_footprints
-from marl_cover.ego import build_ego_graphs, ego_shape
+from marl_cover.ego import build_ego_graphs
 from marl_cover.graph import SpatialGraph
 from tests.helpers import random_grid_graph
 
@@ -215,13 +215,6 @@ def test_greedy_heads_for_the_frontier(u_graph) -> None:  # noqa: ANN001
 def test_pettingzoo_checkers_on_exploration() -> None:
     parallel_api_test(marl_cover.parallel_env(**SMALL), num_cycles=60)
     parallel_seed_test(functools.partial(marl_cover.parallel_env, **SMALL), num_cycles=30)
-
-
-def test_ego_shape_bound_holds_for_exploration() -> None:
-    env = marl_cover.parallel_env(**SMALL)
-    shape = ego_shape(env.max_waypoints, 4, 4, True)
-    observations, _ = env.reset(seed=0)
-    assert observations["robot_0"]["nodes"].shape == (shape.max_nodes, 4)
 
 
 def test_fair_expert_ignores_what_is_not_discovered(u_graph) -> None:  # noqa: ANN001

@@ -21,7 +21,7 @@ import torch
 from tensordict import TensorDict
 
 from agents.datasets import Episode
-from marl_cover.discovery import discovery_steps, frontier_of, sensor_footprints
+from marl_cover.discovery import frontier_of
 from marl_cover.ego import NUM_ACTIONS, NUM_NODE_FEATURES
 from marl_cover.graph import SpatialGraph
 
@@ -87,9 +87,7 @@ def episode_transitions(
             visited[episode.robot_node[t]] = True
             interest[t, :n] = episode.interest & ~visited
         if sensor_range is not None:
-            found = discovery_steps(
-                sensor_footprints(episode.graph, sensor_range), episode.robot_node
-            )
+            found = episode.discovery_steps(sensor_range)
             discovered = np.zeros((steps, max_nodes), dtype=bool)
             frontier = np.zeros((steps, max_nodes), dtype=bool)
             for t in range(steps):
