@@ -23,7 +23,8 @@ key                                    shape            meaning
                                                         (int64), ``blocked``, ``invalid_action``
                                                         (bool), as the PettingZoo ``infos``
 ``("state", k)``                       ``(N, ...)``     ``state()``: the whole graph, ``k`` as
-                                                        above plus ``robot_nodes (N, R)``
+                                                        above plus ``robot_nodes (N, R)`` and
+                                                        ``steps_left (N,)``
 ``done``, ``terminated``, ``truncated``  ``(N, 1)``     episode end (shared by the team)
 =====================================  ===============  ==========================================
 
@@ -57,6 +58,8 @@ INFO_KEYS = {
     "blocked": torch.bool,
     "invalid_action": torch.bool,
 }
+#: Keys of ``("state", k)``.
+STATE_KEYS = (*GRAPH_ARRAYS, "robot_nodes", "steps_left")
 GROUP = "robot"
 
 
@@ -138,6 +141,9 @@ class BatchedCoverageEnv(EnvBase):
         state = graph_specs(core._state_shape, (n,), device)
         state["robot_nodes"] = Bounded(
             0, core._state_shape.max_nodes - 1, shape=(n, r), dtype=torch.int64, device=device
+        )
+        state["steps_left"] = Bounded(
+            0, core.config.max_steps, shape=(n,), dtype=torch.int64, device=device
         )
         self.observation_spec = Composite(
             {GROUP: Composite(group, shape=(n, r)), "state": Composite(state, shape=(n,))},
@@ -233,7 +239,7 @@ class BatchedCoverageEnv(EnvBase):
     def _read(self, env: CoverageEnv) -> dict[str, np.ndarray]:
         """One episode's observation arrays, flat keys (``obs.k``, ``state.k``, ...)."""
         state = env.state()
-        row = {f"state.{k}": state[k] for k in (*GRAPH_ARRAYS, "robot_nodes")}
+        row = {f"state.{k}": state[k] for k in STATE_KEYS}
         row["action_mask"] = state["action_mask"].astype(bool)
         if self.observe_robots:
             ego = env.observe_batch()
@@ -276,7 +282,7 @@ class BatchedCoverageEnv(EnvBase):
                 {k: torch.from_numpy(out[f"obs.{k}"]) for k in GRAPH_ARRAYS}, batch_size=(n, r)
             )
         state = TensorDict(
-            {k: torch.from_numpy(out[f"state.{k}"]) for k in (*GRAPH_ARRAYS, "robot_nodes")},
+            {k: torch.from_numpy(out[f"state.{k}"]) for k in STATE_KEYS},
             batch_size=(n,),
         )
         result = TensorDict(

@@ -17,7 +17,7 @@ Agents                    ``robot_0 ... robot_{num_robots-1}``
 Action space              ``Discrete(5)``: 0 stay, 1 east, 2 north, 3 west, 4 south
 Observation space         ``Dict`` of padded graph arrays (table below)
 State space               ``Dict``: the whole (exploration: known) graph in the same encoding,
-                          plus ``robot_nodes``
+                          plus ``robot_nodes`` and ``steps_left``
 Reward                    Team reward: points of interest newly visited this step (all robots
                           get it); each robot's own count is ``infos[agent]["new_interest"]``
 Termination               Every point of interest has been visited
@@ -51,8 +51,9 @@ key             shape            dtype    meaning
 The ego-graph holds every node within ``hops`` hops of the ego robot in the graph of robots
 and waypoints (each robot linked to its own waypoint and to its neighbours) and every edge
 among them; see :mod:`marl_cover.ego`. ``state()`` has the same keys with robots as nodes
-``0..R-1``, waypoints after them, ``node_pos`` in the map frame, ``action_mask (R, 5)`` and
-``robot_nodes (R,)``.
+``0..R-1``, waypoints after them, ``node_pos`` in the map frame, ``action_mask (R, 5)``,
+``robot_nodes (R,)`` and ``steps_left`` (``()`` int64, actions left in the episode: what a
+centralized critic needs to value a state of a fixed-length episode).
 
 Arguments: the fields of :class:`marl_cover.config.CoverageConfig`; ``max_cycles`` is accepted
 as PettingZoo's name for ``max_steps``.
@@ -232,6 +233,7 @@ class CoverageEnv(ParallelEnv):
                 "robot_nodes": gymnasium.spaces.Box(
                     0, self._state_shape.max_nodes - 1, (r,), np.int64
                 ),
+                "steps_left": gymnasium.spaces.Box(0, base.max_steps, (), np.int64),
             },
         )
         self._rng: np.random.Generator | None = None
@@ -525,7 +527,11 @@ class CoverageEnv(ParallelEnv):
     def state(self) -> dict[str, np.ndarray]:
         """The whole graph in the observation encoding (see the module docstring)."""
         self._require_episode()
-        return self._state_builder.build(self._robot_node, self._waypoint_features, self._discovery)
+        state = self._state_builder.build(
+            self._robot_node, self._waypoint_features, self._discovery
+        )
+        state["steps_left"] = np.array(self.config.max_steps - self._num_steps, dtype=np.int64)
+        return state
 
     def snapshot(self) -> CoverageSnapshot:
         """A read-only copy of the episode's state for planners."""

@@ -10,7 +10,7 @@ pytest.importorskip("torchrl")
 
 from torchrl.envs.utils import check_env_specs  # noqa: E402
 
-from agents.batched_env import GRAPH_ARRAYS, BatchedCoverageEnv  # noqa: E402
+from agents.batched_env import GRAPH_ARRAYS, STATE_KEYS, BatchedCoverageEnv  # noqa: E402
 from marl_cover import parallel_env  # noqa: E402
 
 #: A small procedural city with short episodes, so that a few dozen steps cross episode ends.
@@ -32,7 +32,7 @@ def assert_same_transition(td, envs, returns) -> None:  # noqa: ANN001
         mask = np.stack([observations[a]["action_mask"] for a in agents]).astype(bool)
         np.testing.assert_array_equal(td["robot", "action_mask"][i].numpy(), mask)
         state = env.state()
-        for key in (*GRAPH_ARRAYS, "robot_nodes"):
+        for key in STATE_KEYS:
             np.testing.assert_array_equal(td["state", key][i].numpy(), state[key])
         for key in ("new_interest", "total_interest", "blocked", "invalid_action"):
             assert td["robot", "info", key][i].tolist() == [infos[a][key] for a in agents]

@@ -96,6 +96,46 @@ def test_critics_read_the_stay_edge(rollout) -> None:  # noqa: ANN001
         StateValue(gnn, 3, aggregate="max")
 
 
+def test_time_aware_critics_read_steps_left(rollout) -> None:  # noqa: ANN001
+    # a 10-step episode: the state's steps_left counts down and restarts after the reset
+    steps_left = rollout["state", "steps_left"]  # (2, 12)
+    assert steps_left[0].tolist() == [10, 9, 8, 7, 6, 5, 4, 3, 2, 1, 10, 9]
+    assert rollout["next", "state", "steps_left"][0, 9] == 0  # the last step's next state
+    torch.manual_seed(4)
+    gnn = AggregationGNN(GNNConfig(kind="nonlinear", hops=3, node_features=5)).double()
+    state = [rollout["state", k] for k in GRAPH_IN]
+    state = [v.double() if v.is_floating_point() else v for v in state]
+    values = StateValue(gnn, 3, horizon=10)(*state, steps_left)  # (2, 12, 3, 1)
+    # the same as the network on the nodes with steps_left / 10 appended to every node
+    nodes = state[0]
+    column = (steps_left.double() / 10)[..., None, None].expand(*nodes.shape[:-1], 1)
+    expected = StateValue(gnn, 3)(torch.cat([nodes, column], -1), *state[1:])
+    torch.testing.assert_close(values, expected, rtol=0, atol=0)
+    # the same graphs with one step left are valued otherwise
+    later = StateValue(gnn, 3, horizon=10)(*state, torch.ones_like(steps_left))
+    assert not torch.allclose(values, later)
+    # the ego critic reads the same feature (steps_left broadcast over the robots)
+    obs = [rollout["robot", "observation", k] for k in GRAPH_IN]
+    obs = [v.double() if v.is_floating_point() else v for v in obs]
+    torch.testing.assert_close(
+        EgoValue(gnn, horizon=10)(*obs, steps_left), values, atol=1e-10, rtol=0
+    )
+    with pytest.raises(ValueError, match="steps_left"):
+        StateValue(gnn, 3, horizon=10)(*state)
+    with pytest.raises(ValueError, match="horizon"):
+        StateValue(gnn, 3, horizon=0)
+
+
+def test_end_is_terminal_makes_truncation_terminal(rollout) -> None:  # noqa: ANN001
+    truncated = rollout["next", "truncated"]
+    assert truncated.any() and not rollout["next", "terminated"].any()
+    plain = prepare_batch(rollout.copy(), 1.0)
+    assert not plain["next", "robot", "terminated"].any()
+    finite = prepare_batch(rollout.copy(), 1.0, end_is_terminal=True)
+    assert torch.equal(finite["next", "robot", "terminated"][..., 0, :], truncated)
+    assert torch.equal(finite["next", "robot", "done"], plain["next", "robot", "done"])
+
+
 def test_prepare_batch_and_episode_rewards(rollout) -> None:  # noqa: ANN001
     data = rollout.copy()
     done = data["next", "done"]
@@ -164,6 +204,17 @@ def test_ippo_with_ego_actor_runs(tmp_path: Path) -> None:
     summary = train_mappo(config)
     assert summary["iteration"] == 2
     assert summary["observations"] == 2 * 400 * 3
+
+
+@pytest.mark.parametrize("algorithm", ["mappo", "ippo"])
+def test_time_aware_critic_trains(tmp_path: Path, algorithm: str) -> None:
+    config = tiny_config(
+        tmp_path, f"algorithm={algorithm}", "model.critic_time=true", "collector.n_iters=2"
+    )
+    summary = train_mappo(config)
+    assert summary["iteration"] == 2 and np.isfinite(summary["loss_critic"])
+    checkpoint = torch.load(tmp_path / "run" / "checkpoint.pt", weights_only=False)
+    assert checkpoint["critic_config"]["node_features"] == 5  # 4 node features + steps left
 
 
 def test_config_errors_name_the_key(tmp_path: Path) -> None:

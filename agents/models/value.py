@@ -8,6 +8,11 @@ every step) is that robot's value:
   value, ``(..., R, 1)``; ``aggregate="sum"`` gives the paper's team value ``sum_r v_r``
   (``reference_impl.md`` section 3) at every robot instead.
 - :class:`EgoValue` (IPPO): each robot's value from its own ego-graph, ``(..., 1)``.
+
+With ``horizon`` (the episode length), both also read ``steps_left`` (the state's actions left)
+and give the network ``steps_left / horizon`` as one more feature of every node: in a
+fixed-length episode the same graph is worth less when fewer steps are left, which the graph
+alone does not tell.
 """
 
 from __future__ import annotations
@@ -30,15 +35,26 @@ class StateValue(nn.Module):
         num_robots: Robots per state (the state's first ``5 R`` edges are their action edges).
         aggregate: ``"robot"``: each robot's own output; ``"sum"``: the sum over the team,
             repeated for every robot.
+        horizon: Episode length; given, ``forward`` takes ``steps_left`` and ``gnn`` reads one
+            node feature more than the observations have.
     """
 
-    def __init__(self, gnn: AggregationGNN, num_robots: int, aggregate: str = "robot") -> None:
+    def __init__(
+        self,
+        gnn: AggregationGNN,
+        num_robots: int,
+        aggregate: str = "robot",
+        horizon: int | None = None,
+    ) -> None:
         super().__init__()
         if aggregate not in AGGREGATES:
             raise ValueError(f"aggregate must be one of {AGGREGATES}, got {aggregate!r}")
+        if horizon is not None and horizon < 1:
+            raise ValueError(f"horizon must be >= 1, got {horizon}")
         self.gnn = gnn
         self.num_robots = num_robots
         self.aggregate = aggregate
+        self.horizon = horizon
 
     def forward(
         self,
@@ -47,7 +63,12 @@ class StateValue(nn.Module):
         edge_attr: torch.Tensor,
         edge_mask: torch.Tensor,
         node_mask: torch.Tensor,
+        steps_left: torch.Tensor | None = None,
     ) -> torch.Tensor:
+        if (steps_left is None) != (self.horizon is None):
+            raise ValueError("steps_left must be given exactly when the critic has a horizon")
+        if steps_left is not None:
+            nodes = with_time_feature(nodes, steps_left, self.horizon)
         lead, r = nodes.shape[:-2], self.num_robots
         batch = flat_batch(nodes, edge_index, edge_attr, edge_mask, node_mask)
         flat_nodes, flat_index, flat_attr, heads = flatten_padded(batch, NUM_ACTIONS * r)
@@ -59,12 +80,20 @@ class StateValue(nn.Module):
         return values.reshape(*lead, r, 1)
 
 
+def with_time_feature(nodes: torch.Tensor, steps_left: torch.Tensor, horizon: int) -> torch.Tensor:
+    """``nodes (*B, ..., M, F)`` with ``steps_left (*B,) / horizon`` appended to every node,
+    ``(*B, ..., M, F + 1)``."""
+    fraction = steps_left.to(nodes.dtype) / horizon
+    fraction = fraction.reshape(*fraction.shape, *([1] * (nodes.dim() - fraction.dim())))
+    return torch.cat([nodes, fraction.expand(*nodes.shape[:-1], 1)], dim=-1)
+
+
 class EgoValue(StateValue):
     """Value ``(..., 1)`` of each ego robot from its padded ego-graph ``(..., M, *)`` (laid
     out as a state with one robot, the ego)."""
 
-    def __init__(self, gnn: AggregationGNN) -> None:
-        super().__init__(gnn, num_robots=1)
+    def __init__(self, gnn: AggregationGNN, horizon: int | None = None) -> None:
+        super().__init__(gnn, num_robots=1, horizon=horizon)
 
     def forward(
         self,
@@ -73,5 +102,7 @@ class EgoValue(StateValue):
         edge_attr: torch.Tensor,
         edge_mask: torch.Tensor,
         node_mask: torch.Tensor,
+        steps_left: torch.Tensor | None = None,
     ) -> torch.Tensor:
-        return super().forward(nodes, edge_index, edge_attr, edge_mask, node_mask).squeeze(-2)
+        values = super().forward(nodes, edge_index, edge_attr, edge_mask, node_mask, steps_left)
+        return values.squeeze(-2)

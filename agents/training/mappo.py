@@ -20,6 +20,10 @@ robots, which gives the same logits as running it on each robot's ego-graph (tes
 about a quarter of the work; ``"ego"`` runs it on the ego-graphs the robots observe. Critic
 (``algorithm``): ``"mappo"`` a GNN on ``state`` giving each robot's value (``value_aggregate=
 "sum"``: the paper's sum over robots); ``"ippo"`` a GNN on each robot's own ego-graph.
+``model.critic_time``: the critic also reads the actions left in the episode (``state``'s
+``steps_left``, as one more node feature), and the end of an episode at ``max_steps`` counts as
+terminal in GAE (nothing is collected after it, so its value is not bootstrapped). Without it
+the critic cannot tell the start of an episode from its end on the same graph.
 
 Fine-tuning: ``init`` loads a behaviour-cloned model as the actor (its GNN config replaces
 ``model.actor``); ``optim.critic_warmup_iters`` trains only the critic for the first iterations,
@@ -39,7 +43,7 @@ import json
 import logging
 import math
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -124,13 +128,15 @@ class OptimConfig:
 class ModelConfig:
     """Actor and critic networks (``temperature``: the sampling policy's logits are divided by
     it during training; below 1 the policy PPO improves is closer to the argmax policy that is
-    evaluated and deployed, whose actions it does not change)."""
+    evaluated and deployed, whose actions it does not change; ``critic_time``: see the module
+    docstring)."""
 
     actor: GNNConfig = field(default_factory=lambda: GNNConfig(kind="linear", hops=19))
     critic: GNNConfig = field(default_factory=lambda: GNNConfig(kind="linear", hops=19))
     actor_input: str = "state"
     value_aggregate: str = "robot"
     temperature: float = 1.0
+    critic_time: bool = False
 
 
 @dataclass
@@ -231,19 +237,37 @@ def build_actor(gnn: AggregationGNN, config: MAPPOConfig, num_robots: int) -> An
     )
 
 
-def build_critic(gnn: AggregationGNN, config: MAPPOConfig, num_robots: int) -> Any:
-    """The value module writing ``(robot, state_value)``."""
+def critic_config(config: MAPPOConfig) -> GNNConfig:
+    """The critic network's shape (one node feature more with ``model.critic_time``)."""
+    critic = config.model.critic
+    if config.model.critic_time:
+        critic = replace(critic, node_features=critic.node_features + 1)
+    return critic
+
+
+def build_critic(
+    gnn: AggregationGNN, config: MAPPOConfig, num_robots: int, horizon: int | None = None
+) -> Any:
+    """The value module writing ``(robot, state_value)`` (``horizon``: the episode length, read
+    with ``model.critic_time``)."""
     from tensordict.nn import TensorDictModule
 
+    time_keys = []
+    if config.model.critic_time:
+        if horizon is None:
+            raise ValueError("model.critic_time needs the episode length (horizon)")
+        time_keys = [("state", "steps_left")]
+    else:
+        horizon = None
     if config.algorithm == "ippo":
         return TensorDictModule(
-            EgoValue(gnn),
-            in_keys=[(GROUP, "observation", k) for k in GRAPH_IN],
+            EgoValue(gnn, horizon),
+            in_keys=[(GROUP, "observation", k) for k in GRAPH_IN] + time_keys,
             out_keys=[(GROUP, "state_value")],
         )
     return TensorDictModule(
-        StateValue(gnn, num_robots, config.model.value_aggregate),
-        in_keys=[("state", k) for k in GRAPH_IN],
+        StateValue(gnn, num_robots, config.model.value_aggregate, horizon),
+        in_keys=[("state", k) for k in GRAPH_IN] + time_keys,
         out_keys=[(GROUP, "state_value")],
     )
 
@@ -275,18 +299,23 @@ def build_loss(actor: Any, critic: Any, config: MAPPOConfig) -> Any:
     return loss
 
 
-def prepare_batch(data: Any, reward_scale: float, reward: str = "team") -> Any:
+def prepare_batch(
+    data: Any, reward_scale: float, reward: str = "team", end_is_terminal: bool = False
+) -> Any:
     """Sets the reward each robot learns from (the team reward, or with ``reward="own"`` its
     own newly visited points of interest) times ``reward_scale``, and copies the episode ends
-    onto every robot (GAE reads them beside the per-robot rewards), in place."""
+    onto every robot (GAE reads them beside the per-robot rewards), in place. With
+    ``end_is_terminal`` every episode end (truncation at ``max_steps`` included) is terminal
+    for GAE."""
     if reward not in REWARDS:
         raise ValueError(f"reward must be one of {REWARDS}, got {reward!r}")
     team = data.get(("next", GROUP, "reward"))  # (..., R, 1)
     if reward == "own":
         own = data.get(("next", GROUP, "info", "new_interest")).unsqueeze(-1)
         team = own.to(team.dtype)
-    for key in ("done", "terminated"):
-        data.set(("next", GROUP, key), data.get(("next", key)).unsqueeze(-2).expand(team.shape))
+    ends = {"done": "done", "terminated": "done" if end_is_terminal else "terminated"}
+    for key, source in ends.items():
+        data.set(("next", GROUP, key), data.get(("next", source)).unsqueeze(-2).expand(team.shape))
     data.set(("next", GROUP, "reward"), team * reward_scale)
     return data
 
@@ -321,11 +350,11 @@ def train_mappo(config: MAPPOConfig) -> dict[str, Any]:
     if config.init is not None:
         actor_gnn, init_meta = load_model(config.init)
         metadata["init"] = {"path": config.init, **init_meta}
-    critic_gnn = AggregationGNN(config.model.critic)
+    critic_gnn = AggregationGNN(critic_config(config))
     actor_gnn.to(device).train()
     critic_gnn.to(device).train()
     actor = build_actor(actor_gnn, config, num_robots)
-    critic = build_critic(critic_gnn, config, num_robots)
+    critic = build_critic(critic_gnn, config, num_robots, eval_env.config.max_steps)
     loss_module = build_loss(actor, critic, config)
     critic_lr = config.optim.critic_lr or config.optim.lr
     optimizer = torch.optim.Adam(  # the loss module shares these parameters (tested)
@@ -366,7 +395,12 @@ def train_mappo(config: MAPPOConfig) -> dict[str, Any]:
         collect_seconds = time.perf_counter() - start_time
         rewards = episode_rewards(data)
         # a shallow copy: the collector reuses its buffer, and the keys added here must not stay
-        data = prepare_batch(data.copy().to(device), config.loss.reward_scale, config.loss.reward)
+        data = prepare_batch(
+            data.copy().to(device),
+            config.loss.reward_scale,
+            config.loss.reward,
+            end_is_terminal=config.model.critic_time,
+        )
         with torch.no_grad():
             loss_module.value_estimator(
                 data,
