@@ -28,7 +28,8 @@ is a body (:mod:`marl_cover.dynamics`) that flies to the waypoint it is given:
   robots closer than ``safety_distance`` in the plane and within ``same_altitude`` in height;
   the count of such encounters is in ``infos[agent]["near_misses"]``.
 - **Time.** The episode is truncated after ``max_time`` seconds (``CoverageConfig.max_steps``
-  is not used); ``infos[agent]["time"]`` is the mission time.
+  is not used); ``infos[agent]["time"]`` is the mission time, and ``state()["steps_left"]``
+  counts the nominal moves left (:meth:`QuadrotorCoverageEnv.snapshot`).
 
 With infinite speed and acceleration (:meth:`QuadrotorParams.ideal`) every move takes one
 integration step and this environment reproduces the discrete one step for step (tested).
@@ -41,6 +42,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
+import gymnasium
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -199,6 +201,9 @@ class QuadrotorCoverageEnv(CoverageEnv):
             dynamics = DynamicsConfig.from_dict(dynamics)
         self.dynamics = dynamics or DynamicsConfig()
         self._locator: WaypointLocator | None = None
+        # nominal moves (see snapshot) are at least a control period long
+        most = math.ceil(self.dynamics.max_time / self.dynamics.control_period)
+        self.state_space["steps_left"] = gymnasium.spaces.Box(0, most, (), np.int64)
 
     # ------------------------------------------------------------------ public state
     @property
@@ -244,7 +249,7 @@ class QuadrotorCoverageEnv(CoverageEnv):
         control period."""
         q = self.dynamics.quadrotor
         cruise = self._graph.cell_size / q.max_speed
-        if self.dynamics.retarget == "arrival":
+        if self.dynamics.retarget == "arrival" and not math.isinf(q.max_accel):
             cruise += q.max_speed / q.max_accel
         return max(cruise, self.dynamics.control_period)
 
@@ -389,13 +394,24 @@ class QuadrotorCoverageEnv(CoverageEnv):
         """The discrete snapshot for planners, with each robot at its target waypoint (where
         it is bound) and time counted in nominal moves (:attr:`seconds_per_hop`): ``num_steps``
         moves done, ``max_steps`` in the mission."""
-        hop = self.seconds_per_hop
+        num_steps, max_steps = self._nominal_steps()
         return dataclasses.replace(
             super().snapshot(),
             robot_node=self._target.copy(),
-            num_steps=math.floor(self.time / hop + 1e-9),
-            max_steps=math.ceil(self.dynamics.max_time / hop - 1e-9),
+            num_steps=num_steps,
+            max_steps=max_steps,
         )
+
+    def _nominal_steps(self) -> tuple[int, int]:
+        """Moves done and moves in the mission, counted in :attr:`seconds_per_hop`."""
+        hop = self.seconds_per_hop
+        done = math.floor(self.time / hop + 1e-9)
+        return done, math.ceil(self.dynamics.max_time / hop - 1e-9)
+
+    def _steps_left(self) -> int:
+        """Nominal moves left in the mission (``state()["steps_left"]``)."""
+        done, total = self._nominal_steps()
+        return max(total - done, 0)
 
 
 def parallel_env(

@@ -530,8 +530,12 @@ class CoverageEnv(ParallelEnv):
         state = self._state_builder.build(
             self._robot_node, self._waypoint_features, self._discovery
         )
-        state["steps_left"] = np.array(self.config.max_steps - self._num_steps, dtype=np.int64)
+        state["steps_left"] = np.array(self._steps_left(), dtype=np.int64)
         return state
+
+    def _steps_left(self) -> int:
+        """Actions left in the episode (``state()["steps_left"]``)."""
+        return self.config.max_steps - self._num_steps
 
     def snapshot(self) -> CoverageSnapshot:
         """A read-only copy of the episode's state for planners."""

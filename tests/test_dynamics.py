@@ -112,6 +112,9 @@ def test_arrival_mode_flies_one_edge_per_step_and_visits_on_the_way(path_graph) 
     assert info["ready"] and info["target"] == 1
     assert abs(info["position"][0] - 5.0) <= 0.5  # within the arrival radius
     assert 2.5 <= info["time"] <= 5.0  # 5 m at <= 2 m/s, plus accelerating and braking
+    # 400 s hold 131 nominal moves of 5 / 2 + 2 / 3.5705 = 3.06 s; this one took less
+    assert info["time"] < 3.06 and env.state()["steps_left"] == 131
+    assert env.state_space.contains(env.state())
     assert env.snapped.tolist() == [1]
     _, rewards, *_ = env.step({"robot_0": 0})  # stay: ready again after one period
     assert rewards["robot_0"] == 0.0 and math.isclose(env.time, info["time"] + 0.1)
@@ -181,7 +184,10 @@ def test_infinite_speed_and_acceleration_reproduce_the_discrete_env(retarget: st
                 assert info_d[agent]["new_interest"] == info_c[agent]["new_interest"]
                 assert info_d[agent]["blocked"] == info_c[agent]["blocked"]
             assert (rew_d, term_d, trunc_d) == (rew_c, term_c, trunc_c)
-            assert np.array_equal(discrete.state()["nodes"], continuous.state()["nodes"])
+            state_d, state_c = discrete.state(), continuous.state()
+            assert np.array_equal(state_d["nodes"], state_c["nodes"])
+            assert state_d["steps_left"] == state_c["steps_left"] == 25 - steps
+            assert continuous.state_space.contains(state_c)
         assert not continuous.agents and steps == 25
         assert math.isclose(continuous.time, 2.5)
 
