@@ -252,13 +252,10 @@ def build_critic(
     with ``model.critic_time``)."""
     from tensordict.nn import TensorDictModule
 
-    time_keys = []
-    if config.model.critic_time:
-        if horizon is None:
-            raise ValueError("model.critic_time needs the episode length (horizon)")
-        time_keys = [("state", "steps_left")]
-    else:
-        horizon = None
+    if config.model.critic_time and horizon is None:
+        raise ValueError("model.critic_time needs the episode length (horizon)")
+    horizon = horizon if config.model.critic_time else None
+    time_keys = [("state", "steps_left")] if config.model.critic_time else []
     if config.algorithm == "ippo":
         return TensorDictModule(
             EgoValue(gnn, horizon),
