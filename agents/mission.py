@@ -209,7 +209,8 @@ class MissionConfig:
         expert_iterations: PyVRP iterations per expert solve (deterministic plans).
         dynamics: The continuous-time mode (quadrotor, control loop, radii, altitudes, noise).
         out: Output folder.
-        animate_seed: Seed whose GNN mission is animated (``None``: no animation).
+        animate_seed: Seed whose GNN mission is animated (``None``, or ``null`` in YAML: no
+            animation).
         frame_every: Mission seconds between animation frames.
     """
 
@@ -232,6 +233,16 @@ class MissionConfig:
         unknown = sorted(set(self.methods) - set(MISSION_METHODS))
         if unknown:
             raise ValueError(f"unknown mission method(s) {unknown}; choose from {MISSION_METHODS}")
+        for name, value, smallest in (
+            ("num_robots", self.num_robots, 1),
+            ("seeds", self.seeds, 1),
+            ("seed", self.seed, 0),
+            ("animate_seed", 0 if self.animate_seed is None else self.animate_seed, 0),
+        ):
+            if value < smallest:
+                raise ValueError(f"mission {name} must be >= {smallest}, got {value}")
+        if self.frame_every <= 0:
+            raise ValueError(f"mission frame_every must be > 0 seconds, got {self.frame_every}")
         if isinstance(self.dynamics, dict):
             self.dynamics = DynamicsConfig.from_dict(self.dynamics)
 

@@ -57,7 +57,8 @@ class CoverageConfig:
             (``None``: every free cell).
         map_cell_size: For a grid file: cell size in metres.
         window_fraction: For a grid file: draw a random window of this fraction of the bounding
-            box per axis at each reset (``None``: the whole map).
+            box per axis at each reset (``None``: the whole map). For ``map="paper"``: the
+            fraction of its windows (``None``: the paper's 1/3).
         min_window_nodes: Smallest window accepted, in waypoints.
         graph: A ready-made map; overrides ``map``.
         render_mode: ``None``, ``"human"`` or ``"rgb_array"``.

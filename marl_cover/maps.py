@@ -24,6 +24,8 @@ PAPER_CELL_SIZE = 5.0
 #: Perimeter of the paper's training graph (1266 waypoints) and generalization graph (5659).
 PAPER_PERIMETER = 2.0
 PAPER_LARGE_PERIMETER = 12.0
+#: Side of the paper's training windows, as a fraction of its graph's bounding box per axis.
+PAPER_WINDOW_FRACTION = 1.0 / 3.0
 
 
 def load_occupancy(path: str | os.PathLike[str]) -> np.ndarray:
@@ -106,7 +108,7 @@ def window_size(graph: SpatialGraph, fraction: float) -> np.ndarray:
 def sample_window(
     graph: SpatialGraph,
     rng: np.random.Generator,
-    fraction: float = 1.0 / 3.0,
+    fraction: float = PAPER_WINDOW_FRACTION,
     min_nodes: int = 200,
     max_tries: int = 10_000,
 ) -> SpatialGraph:

@@ -18,6 +18,7 @@ from marl_cover.graph import SpatialGraph
 from marl_cover.maps import (
     PAPER_LARGE_PERIMETER,
     PAPER_PERIMETER,
+    PAPER_WINDOW_FRACTION,
     graph_from_occupancy,
     load_occupancy,
     max_window_nodes,
@@ -124,7 +125,10 @@ def make_map_source(config: CoverageConfig) -> MapSource:
     elif config.map == "city":
         source = CityMap(CityConfig(num_waypoints=config.city_size))
     elif config.map == "paper":
-        source = WindowMap(_cached_paper_graph(PAPER_PERIMETER), 1.0 / 3.0, config.min_window_nodes)
+        fraction = (
+            PAPER_WINDOW_FRACTION if config.window_fraction is None else config.window_fraction
+        )
+        source = WindowMap(_cached_paper_graph(PAPER_PERIMETER), fraction, config.min_window_nodes)
     elif config.map == "paper_full":
         source = FixedMap(_cached_paper_graph(PAPER_PERIMETER))
     elif config.map == "paper_large":

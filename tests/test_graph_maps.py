@@ -98,6 +98,22 @@ def test_paper_windows(paper_map_available: None) -> None:
     assert again[0] == sizes[0]
 
 
+def test_paper_preset_window_fraction(paper_map_available: None) -> None:
+    from marl_cover.config import CoverageConfig
+    from marl_cover.sources import WindowMap, make_map_source
+
+    graph = paper_graph(2.0)
+    default = make_map_source(CoverageConfig(map="paper"))
+    wider = make_map_source(CoverageConfig(map="paper", window_fraction=0.5))
+    assert isinstance(default, WindowMap) and isinstance(wider, WindowMap)
+    assert default.fraction == 1 / 3
+    assert wider.max_waypoints == max_window_nodes(graph, 0.5) > default.max_waypoints
+    # The same generator draws the same window a sampler of that fraction draws.
+    drawn = wider.sample(np.random.default_rng(3))
+    assert drawn.num_nodes == sample_window(graph, np.random.default_rng(3), 0.5).num_nodes
+    assert drawn.num_nodes <= wider.max_waypoints
+
+
 def test_large_maps_load_fast() -> None:
     import time
 

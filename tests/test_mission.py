@@ -96,6 +96,12 @@ def test_mission_config_rejects_unknown_methods_and_keys() -> None:
     config = load(MissionConfig, ROOT / "configs/mission.yaml", ["dynamics.retarget=rate"])
     assert config.dynamics.retarget == "rate" and config.dynamics.quadrotor.mass == 0.71
     assert isinstance(make_mission_policy("greedy", config), GreedyPolicy)
+    assert load(MissionConfig, None, ["animate_seed=null"]).animate_seed is None
+    for key, value in (("animate_seed", -1), ("seeds", 0), ("seed", -2), ("num_robots", 0)):
+        with pytest.raises(ValueError, match=f"mission {key} must be >= .*got {value}"):
+            load(MissionConfig, None, [f"{key}={value}"])
+    with pytest.raises(ValueError, match="frame_every must be > 0"):
+        MissionConfig(frame_every=0.0)
 
 
 def test_run_mission_script(tmp_path: Path) -> None:
