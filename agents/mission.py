@@ -15,8 +15,11 @@ periods change nothing, and the actions would be the same.
 
 from __future__ import annotations
 
+import hashlib
+import json
 import time
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -255,6 +258,31 @@ class MissionConfig:
             hops=self.hops,
             dynamics=self.dynamics,
         )
+
+    def setup(self, method: str) -> dict[str, Any]:
+        """What decides ``method``'s missions besides the seed (kept beside each run's result).
+
+        The GNN's model enters as the SHA-256 of its file, so that a run flown with another
+        model (a new shipped model under ``checkpoint=None`` included) is told apart.
+        """
+        setup = {
+            "method": method,
+            "map": self.map,
+            "num_robots": self.num_robots,
+            "interest_fraction": self.interest_fraction,
+            "dynamics": asdict(self.dynamics),
+        }
+        if method.startswith("greedy"):
+            setup["hops"] = self.hops
+        elif method == "gnn":
+            from agents.models.shipped import shipped_model_path
+
+            path = Path(self.checkpoint) if self.checkpoint else shipped_model_path("coverage")
+            setup["model_sha256"] = hashlib.sha256(path.read_bytes()).hexdigest()
+            setup["gnn_centralized"] = self.gnn_centralized
+        elif method == "expert":
+            setup["expert_iterations"] = self.expert_iterations
+        return json.loads(json.dumps(setup))  # as it reads back from a run file (lists, not tuples)
 
 
 MISSION_METHODS = ("greedy", "greedy_stay", "gnn", "expert")

@@ -2,9 +2,10 @@
 
 Ten quadrotor-like robots on the paper's 1266-waypoint graph for 400 s of mission time (the
 config's defaults); greedy, the routing expert and the GNN, paired over the seeds. Writes, under
-the config's ``out`` folder: ``runs/<method>_<seed>.json`` per mission (skipped when present, so
-an interrupted run resumes), ``mission.json`` (the table), ``mission.png`` (points of interest
-visited over time, mean +- SEM) and ``mission_gnn.gif`` (one GNN mission).
+the config's ``out`` folder: ``runs/<method>_<seed>.json`` per mission (read back when present
+and flown under the same setup, so an interrupted run resumes), ``mission.json`` (the table),
+``mission.png`` (points of interest visited over time, mean +- SEM) and ``mission_gnn.gif``
+(one GNN mission).
 
     python scripts/run_mission.py [--config configs/mission.yaml] [key=value ...]
     e.g.  python scripts/run_mission.py seeds=3 methods=[greedy,gnn] dynamics.retarget=rate
@@ -40,13 +41,14 @@ def fly_all(config: MissionConfig, out: Path) -> dict[str, list[dict]]:
     for method in config.methods:
         policy = None
         results[method] = []
+        setup = config.setup(method)
         for seed in range(config.seed, config.seed + config.seeds):
             path = out / "runs" / f"{method}_{seed}.json"
             if path.is_file():
-                results[method].append(json.loads(path.read_text()))
+                results[method].append(read_run(path, setup))
                 continue
             policy = policy or make_mission_policy(method, config)
-            result = run_mission(env, policy, seed).as_dict()
+            result = {**run_mission(env, policy, seed).as_dict(), "setup": setup}
             write_text_atomic(path, json.dumps(result))
             results[method].append(result)
             print(
@@ -56,6 +58,26 @@ def fly_all(config: MissionConfig, out: Path) -> dict[str, list[dict]]:
                 flush=True,
             )
     return results
+
+
+def read_run(path: Path, setup: dict) -> dict:
+    """A finished mission, read back for resuming.
+
+    Raises:
+        ValueError: it was flown under another setup (another model, map, team or dynamics),
+            naming the file and what differs.
+    """
+    result = json.loads(path.read_text())
+    recorded = result.get("setup")
+    if recorded is None:
+        print(f"note: {path} does not record its setup; reused as it is", flush=True)
+    elif recorded != setup:
+        differ = sorted(k for k in set(recorded) | set(setup) if recorded.get(k) != setup.get(k))
+        raise ValueError(
+            f"{path} was flown under another setup (differs in {differ}); "
+            "delete it or choose another out= folder"
+        )
+    return result
 
 
 def sem(values: np.ndarray) -> float:

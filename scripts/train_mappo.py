@@ -3,7 +3,7 @@
     python scripts/train_mappo.py                                 # configs/mappo_coverage.yaml
     python scripts/train_mappo.py collector.n_iters=2 collector.frames_per_batch=200
     python scripts/train_mappo.py algorithm=ippo out=outputs/mappo/ippo
-    python scripts/train_mappo.py init=agents/models/shipped/coverage_gnn.pt \\
+    python scripts/train_mappo.py init=agents/models/shipped/bc/coverage_gnn.pt \\
         optim.critic_warmup_iters=10 out=outputs/mappo/finetune          # fine-tune a BC model
     python scripts/train_mappo.py device=cuda collector.workers=4
 

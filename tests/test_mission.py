@@ -129,3 +129,9 @@ def test_run_mission_script(tmp_path: Path) -> None:
     # A second run reads the missions back instead of flying them again.
     again = subprocess.run(args, capture_output=True, text=True, cwd=ROOT, timeout=300)
     assert again.returncode == 0 and "seed" not in again.stdout.split("points of interest")[0]
+    # Another model under the same out= folder is an error that names the run and the change.
+    other = args + ["checkpoint=agents/models/shipped/bc/coverage_gnn.pt"]
+    refused = subprocess.run(other, capture_output=True, text=True, cwd=ROOT, timeout=300)
+    assert refused.returncode != 0
+    assert "gnn_0.json was flown under another setup" in refused.stderr
+    assert "model_sha256" in refused.stderr
