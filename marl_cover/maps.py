@@ -161,22 +161,26 @@ def max_window_nodes(graph: SpatialGraph, fraction: float) -> int:
 def paper_map_path() -> Path:
     """Location of the paper's ``grid_slice10.npy``.
 
-    Looks at ``$MARL_COVER_PAPER_MAP``, then ``shared/maps/`` beside the repository root, then
-    ``../shared/maps/`` under the working directory.
+    ``$MARL_COVER_PAPER_MAP`` when it is set; otherwise ``shared/maps/`` beside the repository
+    root, then ``../shared/maps/`` under the working directory.
 
     Raises:
-        FileNotFoundError: listing every place looked at.
+        FileNotFoundError: ``$MARL_COVER_PAPER_MAP`` names no file (naming it), or no map was
+            found, listing every place looked at.
     """
-    candidates = []
     if os.environ.get(PAPER_MAP_ENV):
-        candidates.append(Path(os.environ[PAPER_MAP_ENV]))
+        chosen = Path(os.environ[PAPER_MAP_ENV])
+        if not chosen.is_file():
+            raise FileNotFoundError(f"{PAPER_MAP_ENV}={chosen} names no file")
+        return chosen
+    candidates = []
     repo_root = Path(__file__).resolve().parent.parent
     candidates.append(repo_root.parent / "shared" / "maps" / PAPER_MAP_NAME)
     candidates.append(Path.cwd().parent / "shared" / "maps" / PAPER_MAP_NAME)
     for path in candidates:
         if path.is_file():
             return path
-    tried = ", ".join(str(p) for p in candidates)
+    tried = ", ".join(dict.fromkeys(str(p) for p in candidates))  # each place once
     raise FileNotFoundError(
         f"the paper's map {PAPER_MAP_NAME} was not found (tried {tried}); "
         f"set {PAPER_MAP_ENV} to its path"
