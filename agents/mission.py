@@ -15,15 +15,13 @@ periods change nothing, and the actions would be the same.
 
 from __future__ import annotations
 
-import hashlib
-import json
 import time
 from dataclasses import asdict, dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from agents.cli import file_sha256
 from agents.experts.expert import RoutingExpert, step_toward
 from marl_cover.continuous import DynamicsConfig, QuadrotorCoverageEnv
 
@@ -277,12 +275,12 @@ class MissionConfig:
         elif method == "gnn":
             from agents.models.shipped import shipped_model_path
 
-            path = Path(self.checkpoint) if self.checkpoint else shipped_model_path("coverage")
-            setup["model_sha256"] = hashlib.sha256(path.read_bytes()).hexdigest()
+            path = self.checkpoint or shipped_model_path("coverage")
+            setup["model_sha256"] = file_sha256(path)
             setup["gnn_centralized"] = self.gnn_centralized
         elif method == "expert":
             setup["expert_iterations"] = self.expert_iterations
-        return json.loads(json.dumps(setup))  # as it reads back from a run file (lists, not tuples)
+        return setup
 
 
 MISSION_METHODS = ("greedy", "greedy_stay", "gnn", "expert")

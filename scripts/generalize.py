@@ -4,7 +4,8 @@ The GNN was trained with 4 robots on ~228-waypoint windows; here it runs on the 
 map (T = 50, K = the model's receptive field) in one centralized pass per step (the same actions
 as each robot on its own ego-graph, tested). Greedy runs on each robot's ego-graph. Seeds are
 paired across methods. Each (method, team size) result is written to
-``OUT/<method>_R<robots>.json`` when done and skipped when present (resumable).
+``OUT/<method>_R<robots>.json`` when done, with its setup (task, seeds, the model's SHA-256),
+and read back when present (resumable); a file made under another setup is an error.
 
     python scripts/generalize.py [--task coverage|exploration] [--robots 10 20 30 40 50 100]
         [--episodes 100] [--checkpoint agents/models/shipped/<task>_gnn.pt]
@@ -20,7 +21,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from agents.cli import write_text_atomic  # noqa: E402
+from agents.cli import file_sha256, read_result, write_text_atomic  # noqa: E402
 from agents.evaluation import evaluate  # noqa: E402
 from agents.greedy import GreedyPolicy  # noqa: E402
 from agents.paper import paper_numbers  # noqa: E402
@@ -29,6 +30,18 @@ from marl_cover.config import TASKS  # noqa: E402
 
 TEAMS = [10, 20, 30, 40, 50, 100]
 PAPER_METHODS = {"greedy": "greedy", "gnn": "gnn_nonlinear_bc"}
+
+
+def setup(method: str, robots: int, args: argparse.Namespace) -> dict:
+    """What decides one (method, team size) result: a file made under another is not reused."""
+    return {
+        "method": method,
+        "task": args.task,
+        "robots": robots,
+        "episodes": args.episodes,
+        "seed": args.seed,
+        "model_sha256": file_sha256(args.checkpoint) if method == "gnn" else None,
+    }
 
 
 def run(method: str, robots: int, args: argparse.Namespace, model) -> dict:  # noqa: ANN001
@@ -57,6 +70,7 @@ def run(method: str, robots: int, args: argparse.Namespace, model) -> dict:  # n
         "sem": summary.sem,
         "rewards": [r.reward for r in summary.results],
         "controller_ms_per_step": summary.controller_ms_per_step,
+        "setup": setup(method, robots, args),
     }
 
 
@@ -85,7 +99,9 @@ def main() -> None:
         for robots in args.robots:
             for method in args.methods:
                 path = args.out / f"{method}_R{robots}.json"
-                if not path.exists():
+                if path.exists():
+                    read_result(path, setup(method, robots, args))
+                else:
                     write_text_atomic(path, json.dumps(run(method, robots, args, model), indent=2))
                     print(f"done {method} R={robots}", flush=True)
     records = {

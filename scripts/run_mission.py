@@ -22,7 +22,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from agents.cli import write_bytes_atomic, write_text_atomic  # noqa: E402
+from agents.cli import read_result, write_bytes_atomic, write_text_atomic  # noqa: E402
 from agents.configuration import as_dict, load  # noqa: E402
 from agents.mission import (  # noqa: E402
     MissionConfig,
@@ -45,7 +45,7 @@ def fly_all(config: MissionConfig, out: Path) -> dict[str, list[dict]]:
         for seed in range(config.seed, config.seed + config.seeds):
             path = out / "runs" / f"{method}_{seed}.json"
             if path.is_file():
-                results[method].append(read_run(path, setup))
+                results[method].append(read_result(path, setup))
                 continue
             policy = policy or make_mission_policy(method, config)
             result = {**run_mission(env, policy, seed).as_dict(), "setup": setup}
@@ -58,26 +58,6 @@ def fly_all(config: MissionConfig, out: Path) -> dict[str, list[dict]]:
                 flush=True,
             )
     return results
-
-
-def read_run(path: Path, setup: dict) -> dict:
-    """A finished mission, read back for resuming.
-
-    Raises:
-        ValueError: it was flown under another setup (another model, map, team or dynamics),
-            naming the file and what differs.
-    """
-    result = json.loads(path.read_text())
-    recorded = result.get("setup")
-    if recorded is None:
-        print(f"note: {path} does not record its setup; reused as it is", flush=True)
-    elif recorded != setup:
-        differ = sorted(k for k in set(recorded) | set(setup) if recorded.get(k) != setup.get(k))
-        raise ValueError(
-            f"{path} was flown under another setup (differs in {differ}); "
-            "delete it or choose another out= folder"
-        )
-    return result
 
 
 def sem(values: np.ndarray) -> float:

@@ -133,5 +133,5 @@ def test_run_mission_script(tmp_path: Path) -> None:
     other = args + ["checkpoint=agents/models/shipped/bc/coverage_gnn.pt"]
     refused = subprocess.run(other, capture_output=True, text=True, cwd=ROOT, timeout=300)
     assert refused.returncode != 0
-    assert "gnn_0.json was flown under another setup" in refused.stderr
+    assert "gnn_0.json was made under another setup" in refused.stderr
     assert "model_sha256" in refused.stderr
