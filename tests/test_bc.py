@@ -18,6 +18,7 @@ from agents.models.gnn import action_logits  # noqa: E402
 from agents.models.policy import (  # noqa: E402
     EgoGraphLogits,
     GNNPolicy,
+    average_models,
     load_model,
     make_actor,
     save_model,
@@ -136,6 +137,30 @@ def test_model_files_round_trip_and_bad_files_are_named(tmp_path) -> None:
         load_model(tmp_path / "bad.pt")
     with pytest.raises(FileNotFoundError, match="missing.pt"):
         load_model(tmp_path / "missing.pt")
+
+
+def test_averaged_models_hold_the_mean_weights(tmp_path) -> None:
+    config = GNNConfig(kind="nonlinear", hops=2, hidden=4)
+    torch.manual_seed(0)
+    models = [AggregationGNN(config) for _ in range(3)]
+    for i, model in enumerate(models):
+        save_model(tmp_path / f"m{i}.pt", model, {"seed": i})
+    paths = [tmp_path / f"m{i}.pt" for i in range(3)]
+    average, metadata = average_models(paths)
+    assert metadata == {"seed": 0, "average_of": [str(p) for p in paths]}
+    for key, value in average.state_dict().items():
+        expected = (sum(m.state_dict()[key] for m in models)) / 3
+        torch.testing.assert_close(value, expected, rtol=0, atol=1e-7)
+    assert (
+        average_models(paths[:1] * 2)[0]
+        .state_dict()["readout.weight"]
+        .equal(models[0].state_dict()["readout.weight"])
+    )
+    save_model(tmp_path / "wide.pt", AggregationGNN(GNNConfig(kind="nonlinear", hops=2)), {})
+    with pytest.raises(ValueError, match="wide.pt holds a .* network, not the"):
+        average_models([paths[0], tmp_path / "wide.pt"])
+    with pytest.raises(ValueError, match="at least two model files"):
+        average_models(paths[:1])
 
 
 def test_configs_reject_unknown_keys_and_read_sections(tmp_path) -> None:

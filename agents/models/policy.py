@@ -293,3 +293,33 @@ def load_model(path: str | Path) -> tuple[AggregationGNN, dict[str, Any]]:
     model = AggregationGNN(GNNConfig(**record["gnn_config"]))
     model.load_state_dict(record["state_dict"])
     return model.eval(), dict(record.get("metadata", {}))
+
+
+def average_models(paths: list[str | Path]) -> tuple[AggregationGNN, dict[str, Any]]:
+    """The parameter-wise mean of the networks saved at ``paths`` (a "model soup").
+
+    Meant for models fine-tuned from one start, whose weights stay close; the metadata is the
+    first file's, with ``"average_of"`` listing every file.
+
+    Raises:
+        ValueError: fewer than two files, or a file whose network has another config than the
+            first's, naming it.
+    """
+    if len(paths) < 2:
+        raise ValueError(f"averaging needs at least two model files, got {len(paths)}")
+    models = []
+    for path in paths:
+        model, metadata = load_model(path)
+        if models and model.config != models[0].config:
+            raise ValueError(
+                f"{path} holds a {model.config} network, not the {models[0].config} of {paths[0]}"
+            )
+        models.append(model)
+        if len(models) == 1:
+            first = metadata
+    average = AggregationGNN(models[0].config)
+    states = [m.state_dict() for m in models]
+    average.load_state_dict(
+        {key: torch.stack([state[key] for state in states]).mean(dim=0) for key in states[0]}
+    )
+    return average.eval(), {**first, "average_of": [str(p) for p in paths]}
