@@ -40,7 +40,7 @@ def setup(method: str, robots: int, args: argparse.Namespace) -> dict:
         "robots": robots,
         "episodes": args.episodes,
         "seed": args.seed,
-        "model_sha256": file_sha256(args.checkpoint) if method == "gnn" else None,
+        "model_sha256": args.model_sha256 if method == "gnn" else None,
     }
 
 
@@ -94,6 +94,7 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(1)
     args.checkpoint = args.checkpoint or shipped_model_path(args.task)
+    args.model_sha256 = file_sha256(args.checkpoint)  # names the model in each result's setup
     model, _ = load_model(args.checkpoint)
     if not args.table_only:
         for robots in args.robots:

@@ -307,19 +307,15 @@ def average_models(paths: list[str | Path]) -> tuple[AggregationGNN, dict[str, A
     """
     if len(paths) < 2:
         raise ValueError(f"averaging needs at least two model files, got {len(paths)}")
-    models = []
-    for path in paths:
-        model, metadata = load_model(path)
-        if models and model.config != models[0].config:
+    (first, metadata), *others = [load_model(path) for path in paths]
+    for path, (model, _) in zip(paths[1:], others, strict=True):
+        if model.config != first.config:
             raise ValueError(
-                f"{path} holds a {model.config} network, not the {models[0].config} of {paths[0]}"
+                f"{path} holds a {model.config} network, not the {first.config} of {paths[0]}"
             )
-        models.append(model)
-        if len(models) == 1:
-            first = metadata
-    average = AggregationGNN(models[0].config)
-    states = [m.state_dict() for m in models]
+    average = AggregationGNN(first.config)
+    states = [first.state_dict(), *(model.state_dict() for model, _ in others)]
     average.load_state_dict(
         {key: torch.stack([state[key] for state in states]).mean(dim=0) for key in states[0]}
     )
-    return average.eval(), {**first, "average_of": [str(p) for p in paths]}
+    return average.eval(), {**metadata, "average_of": [str(p) for p in paths]}
