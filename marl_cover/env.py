@@ -79,6 +79,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import numbers
 import warnings
 from dataclasses import dataclass
 from typing import Any
@@ -281,6 +282,8 @@ class CoverageEnv(ParallelEnv):
             options: ``robot_nodes`` (start waypoints, one per robot) and ``interest_nodes``
                 (the points of interest) fix those draws; other keys are ignored with a warning.
         """
+        if seed is not None and not (isinstance(seed, numbers.Integral) and seed >= 0):
+            raise ValueError(f"seed must be a non-negative integer or None, got {seed!r}")
         if seed is not None or self._rng is None:
             self._rng = np.random.default_rng(seed)
         options = dict(options or {})
@@ -431,18 +434,18 @@ class CoverageEnv(ParallelEnv):
     def _read_actions(self, actions: dict[str, Any]) -> np.ndarray:
         if not self.agents:
             raise RuntimeError("step() called with no live agents; call reset() first")
+        unknown = [a for a in actions if a not in self._agent_indices]
+        if unknown:
+            raise ValueError(
+                f"actions given for unknown agents {unknown}; the agents are {self.possible_agents}"
+            )
         missing = [a for a in self.agents if a not in actions]
         if missing:
             raise ValueError(f"no action given for {missing}")
-        unknown = [a for a in actions if a not in self._agent_indices]
-        if unknown:
-            raise ValueError(f"actions given for unknown agents {unknown}")
         action = np.empty(len(self.possible_agents), dtype=np.int64)
         for agent, i in self._agent_indices.items():
             value = actions[agent]
-            if not (
-                np.ndim(value) == 0 and float(value) == int(value) and 0 <= value < NUM_ACTIONS
-            ):
+            if not _is_action(value):
                 raise ValueError(f"action of {agent} must be an integer in [0, 5), got {value!r}")
             action[i] = int(value)
         return action
@@ -605,6 +608,17 @@ class CoverageEnv(ParallelEnv):
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
+
+
+def _is_action(value: Any) -> bool:
+    """Whether ``value`` is an integer action in ``[0, NUM_ACTIONS)`` (integral floats count)."""
+    if isinstance(value, (bool, np.bool_, str, bytes)) or np.ndim(value) != 0:
+        return False
+    try:
+        number = float(value)  # Python and numpy numbers, 0-d arrays and tensors
+    except (TypeError, ValueError):
+        return False
+    return number.is_integer() and 0 <= number < NUM_ACTIONS
 
 
 def _config_kwargs(kwargs: dict[str, Any]) -> dict[str, Any]:

@@ -157,12 +157,33 @@ def test_masked_action_can_raise(path_graph: SpatialGraph) -> None:
         ({"robot_0": 0, "robot_1": 0, "robot_9": 0}, "unknown agents \\['robot_9'\\]"),
         ({"robot_0": 0, "robot_1": 7}, "action of robot_1"),
         ({"robot_0": 1.5, "robot_1": 0}, "action of robot_0"),
+        ({"robot_0": 0, "robot_1": "x"}, "action of robot_1 .* got 'x'"),
+        ({"robot_0": True, "robot_1": 0}, "action of robot_0 .* got True"),
+        ({"robot_0": np.array([1]), "robot_1": 0}, "action of robot_0"),
+        ({"robot_9": 0}, "unknown agents \\['robot_9'\\]; the agents are"),  # typo before gaps
     ],
 )
 def test_bad_actions_name_the_robot(path_graph: SpatialGraph, actions, message) -> None:
     env, *_ = make(path_graph, [0, 5], [5])
     with pytest.raises(ValueError, match=message):
         env.step(actions)
+
+
+def test_integer_actions_of_any_numeric_type(path_graph: SpatialGraph) -> None:
+    """Python, numpy (scalar and 0-d) and integral floats are the same action."""
+    positions = []
+    for action in (1, np.int64(1), np.array(1), 1.0):  # 1 = east
+        env, *_ = make(path_graph, [0, 5], [5])
+        env.step({"robot_0": action, "robot_1": 0})
+        positions.append(env.snapshot().robot_node.tolist())
+    assert positions == [[1, 5]] * 4
+
+
+@pytest.mark.parametrize("seed", [-1, 1.5, "0"])
+def test_reset_rejects_bad_seeds(seed) -> None:
+    env = marl_cover.parallel_env()
+    with pytest.raises(ValueError, match="seed must be a non-negative integer"):
+        env.reset(seed=seed)
 
 
 def test_config_errors_name_the_key(path_graph: SpatialGraph) -> None:
