@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from agents.cli import parse_value
+from marl_cover.config import check_values
 
 T = TypeVar("T")
 
@@ -25,7 +26,8 @@ def build(cls: type[T], values: dict[str, Any], where: str = "config") -> T:
     """An instance of dataclass ``cls`` from a (nested) mapping.
 
     Raises:
-        ValueError: an unknown key or a section that is not a mapping, naming it and ``where``.
+        ValueError: an unknown key, a section that is not a mapping or a value of the wrong
+            type (:func:`marl_cover.config.check_values`), naming it and ``where``.
     """
     if not isinstance(values, dict):
         raise ValueError(f"{where}: expected a mapping for {cls.__name__}, got {values!r}")
@@ -40,7 +42,11 @@ def build(cls: type[T], values: dict[str, Any], where: str = "config") -> T:
             kwargs[key] = build(kind, value, f"{where}.{key}")
         else:
             kwargs[key] = value
-    return cls(**kwargs)
+    try:
+        check_values(cls, kwargs)  # before the constructor compares them
+        return cls(**kwargs)
+    except TypeError as error:
+        raise ValueError(f"{where}: {error}") from error
 
 
 def as_dict(config: Any) -> dict[str, Any]:

@@ -3,8 +3,15 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
+import numbers
+import os
+import types
+import typing
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
+
+import numpy as np
 
 from marl_cover.graph import SpatialGraph
 
@@ -17,6 +24,77 @@ TASKS = ("coverage", "exploration")
 RENDER_MODES = ("human", "rgb_array")
 
 T = TypeVar("T")
+
+
+def check_field_types(config: Any) -> None:
+    """Checks the fields of dataclass ``config`` against their annotations.
+
+    Covers the annotations configs use: ``int``, ``float`` (an ``int`` is accepted), ``bool``,
+    ``str``, ``X | None`` and ``tuple``/``list`` of those; numpy numbers count as Python ones,
+    a ``bool`` is not a number, and other annotations (nested configs, graphs) are not checked.
+
+    Raises:
+        TypeError: a field holds a value of another type, naming the class, the field, the
+            expected type and the value.
+    """
+    check_values(
+        type(config), {f.name: getattr(config, f.name) for f in dataclasses.fields(config)}
+    )
+
+
+def check_values(cls: type, values: dict[str, Any]) -> None:
+    """:func:`check_field_types` on ``values`` meant for the fields of dataclass ``cls``, before
+    it is built (keys that are not fields are left to the constructor).
+
+    Raises:
+        TypeError: as :func:`check_field_types`.
+    """
+    hints = _type_hints(cls)
+    for name, value in values.items():
+        if name in hints and not _matches(value, hints[name]):
+            raise TypeError(
+                f"{cls.__name__}.{name} must be {_describe(hints[name])}, got {value!r} "
+                f"({type(value).__name__})"
+            )
+
+
+@functools.cache
+def _type_hints(cls: type) -> dict[str, Any]:
+    hints = typing.get_type_hints(cls)
+    return {f.name: hints[f.name] for f in dataclasses.fields(cls) if f.name in hints}
+
+
+def _matches(value: Any, hint: Any) -> bool:
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if origin in (typing.Union, types.UnionType):
+        return any(_matches(value, arg) for arg in args)
+    if origin in (tuple, list):
+        if not isinstance(value, (tuple, list)):
+            return False
+        if origin is tuple and args and args[-1] is not Ellipsis:
+            return len(value) == len(args) and all(map(_matches, value, args))
+        return not args or all(_matches(item, args[0]) for item in value)
+    if hint is type(None):
+        return value is None
+    if hint is bool:
+        return isinstance(value, (bool, np.bool_))
+    if hint in (int, float):
+        if isinstance(value, (bool, np.bool_)):
+            return False
+        return isinstance(value, numbers.Integral if hint is int else numbers.Real)
+    if hint is str:
+        return isinstance(value, str)
+    return True  # nested configs, graphs, Any: checked where they are built
+
+
+def _describe(hint: Any) -> str:
+    if typing.get_origin(hint) in (typing.Union, types.UnionType):
+        return " or ".join(_describe(arg) for arg in typing.get_args(hint))
+    if hint is type(None):
+        return "None"
+    return {int: "an integer", float: "a number", bool: "true or false", str: "a string"}.get(
+        hint, str(hint)
+    )
 
 
 def config_from_dict(cls: type[T], values: dict[str, Any]) -> T:
@@ -51,7 +129,7 @@ class CoverageConfig:
         invalid_action: What a masked-out action does: ``"noop"`` (the robot stays and its
             ``infos["invalid_action"]`` is 1) or ``"raise"`` (``ValueError`` naming the robot).
         map: ``"city"``, ``"paper"``, ``"paper_full"``, ``"paper_large"``, or a path to an
-            occupancy grid (``.npy`` or an image).
+            occupancy grid (``.npy`` or an image; a ``pathlib.Path`` is stored as a string).
         city_size: Waypoints of each procedural city (``map="city"``).
         map_perimeter: For a grid file: keep free cells within this many cells of an obstacle
             (``None``: every free cell).
@@ -86,6 +164,9 @@ class CoverageConfig:
     ego_backend: str = "auto"
 
     def __post_init__(self) -> None:
+        if isinstance(self.map, os.PathLike):  # a grid file given as a Path
+            object.__setattr__(self, "map", os.fspath(self.map))
+        check_field_types(self)
         checks = [
             (self.task in TASKS, f"task must be one of {TASKS}, got {self.task!r}"),
             (self.sensor_range > 0, f"sensor_range must be > 0 metres, got {self.sensor_range}"),

@@ -47,7 +47,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from marl_cover.collisions import resolve_collisions
-from marl_cover.config import CoverageConfig, config_from_dict
+from marl_cover.config import CoverageConfig, check_field_types, config_from_dict
 from marl_cover.dynamics import QuadrotorParams, QuadrotorTeam
 from marl_cover.ego import action_targets
 from marl_cover.env import CoverageEnv, StepResult, _config_kwargs
@@ -134,6 +134,7 @@ class DynamicsConfig:
     def __post_init__(self) -> None:
         if isinstance(self.quadrotor, dict):
             object.__setattr__(self, "quadrotor", config_from_dict(QuadrotorParams, self.quadrotor))
+        check_field_types(self)
         object.__setattr__(self, "altitude_range", tuple(float(a) for a in self.altitude_range))
         substeps = self.control_period / self.quadrotor.dt
         checks = [

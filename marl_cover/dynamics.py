@@ -28,6 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from marl_cover.config import check_field_types
+
 #: Standard gravity, m/s^2.
 GRAVITY = 9.81
 
@@ -60,6 +62,7 @@ class QuadrotorParams:
     dt: float = 0.01
 
     def __post_init__(self) -> None:
+        check_field_types(self)
         positive = ("mass", "max_speed", "max_accel", "position_gain", "velocity_gain", "dt")
         for name in positive:
             if not getattr(self, name) > 0:

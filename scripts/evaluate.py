@@ -39,7 +39,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from agents.cli import parse_value, write_text_atomic  # noqa: E402
 from agents.evaluation import evaluate  # noqa: E402
 from marl_cover import CoverageConfig, parallel_env  # noqa: E402
-from marl_cover.config import TASKS  # noqa: E402
+from marl_cover.config import TASKS, check_field_types  # noqa: E402
 
 POLICIES = ("greedy", "greedy_central", "expert", "expert_rh", "gnn")
 
@@ -106,9 +106,18 @@ def parse_overrides(
                 f"{sorted(f.name for f in fields(EvaluateOptions))}, environment "
                 f"keys {sorted(env_keys)}, expert.* and gnn.*"
             )
+    for checked in (options, expert, gnn):
+        try:
+            check_field_types(checked)
+        except TypeError as error:
+            raise SystemExit(str(error)) from error
     if options.task not in TASKS:
         raise SystemExit(f"unknown task {options.task!r}; tasks: {list(TASKS)}")
     env["task"] = options.task
+    try:
+        CoverageConfig(**env)  # names a bad environment value before anything runs
+    except (TypeError, ValueError) as error:
+        raise SystemExit(str(error)) from error
     if options.policy not in POLICIES:
         raise SystemExit(f"unknown policy {options.policy!r}; policies: {list(POLICIES)}")
     return options, expert, gnn, env

@@ -176,6 +176,18 @@ def test_configs_reject_unknown_keys_and_read_sections(tmp_path) -> None:
         configuration.load(BCConfig, preset)
 
 
+def test_configs_reject_values_of_the_wrong_type(tmp_path) -> None:
+    with pytest.raises(ValueError, match=r"BCConfig.steps must be an integer, got 1.5"):
+        configuration.load(BCConfig, None, ["steps=1.5"])
+    with pytest.raises(ValueError, match=r"overrides.model: GNNConfig.hops must be an integer"):
+        configuration.load(BCConfig, None, ["model.hops=many"])
+    preset = tmp_path / "typo.yaml"
+    preset.write_text("lr: fast\n")
+    with pytest.raises(ValueError, match=r"typo.yaml: BCConfig.lr must be a number, got 'fast'"):
+        configuration.load(BCConfig, preset)
+    assert configuration.load(BCConfig, None, ["lr=1"]).lr == 1  # an integer is a number
+
+
 def small_dataset(folder) -> None:  # noqa: ANN001
     episodes = record(range(12))
     write_shard(folder / "shard_00000.npz", episodes[:6])

@@ -79,6 +79,11 @@ def test_bad_parameters_are_named() -> None:
         DynamicsConfig.from_dict({"quadrotor": {"mas": 1.0}})
     with pytest.raises(ValueError, match="noise_std and delay"):
         QuadrotorTeam(QuadrotorParams(), np.zeros((1, 3)), noise_std=-1.0)
+    with pytest.raises(TypeError, match="QuadrotorParams.mass must be a number, got 'heavy'"):
+        DynamicsConfig.from_dict({"quadrotor": {"mass": "heavy"}})
+    with pytest.raises(TypeError, match=r"DynamicsConfig.altitude_range must be tuple"):
+        DynamicsConfig(altitude_range=(3.0, "high"))
+    assert DynamicsConfig(altitude_range=[3, 8], max_time=400).altitude_range == (3.0, 8.0)
 
 
 # ---------------------------------------------------------------------- snapping

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 from helpers import random_grid_graph
@@ -201,6 +203,27 @@ def test_config_errors_name_the_key(path_graph: SpatialGraph) -> None:
         marl_cover.parallel_env(map="nowhere.npy")
     with pytest.raises(TypeError, match="not both"):
         marl_cover.parallel_env(max_steps=3, max_cycles=3)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"num_robots": "4"}, "CoverageConfig.num_robots must be an integer, got '4'"),
+        ({"hops": 2.5}, "CoverageConfig.hops must be an integer, got 2.5"),
+        ({"allow_swaps": 1}, "CoverageConfig.allow_swaps must be true or false, got 1"),
+        ({"window_fraction": "x"}, "CoverageConfig.window_fraction must be a number or None"),
+        ({"map": 3}, "CoverageConfig.map must be a string, got 3"),
+    ],
+)
+def test_config_values_of_the_wrong_type_name_the_key(kwargs, message) -> None:
+    with pytest.raises(TypeError, match=re.escape(message)):
+        marl_cover.parallel_env(**kwargs)
+
+
+def test_config_accepts_numpy_numbers_and_paths(tmp_path) -> None:
+    config = CoverageConfig(num_robots=np.int64(3), sensor_range=np.float32(20), max_steps=7)
+    assert config.num_robots == 3 and config.interest_fraction == 0.5
+    assert CoverageConfig(map=tmp_path / "grid.npy").map == str(tmp_path / "grid.npy")
 
 
 def test_reset_draws_paper_defaults() -> None:

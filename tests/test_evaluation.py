@@ -65,6 +65,21 @@ def test_cli_rejects_unknown_keys() -> None:
     assert result.returncode != 0 and "expert.budget" in result.stderr
 
 
+@pytest.mark.parametrize(
+    ("argument", "message"),
+    [
+        ("episodes=abc", "EvaluateOptions.episodes must be an integer, got 'abc'"),
+        ("expert.time_limit=soon", "ExpertOptions.time_limit must be a number"),
+        ("num_robots=x", "CoverageConfig.num_robots must be an integer, got 'x'"),
+        ("window_fraction=3", "window_fraction must be in (0, 1], got 3"),
+    ],
+)
+def test_cli_names_bad_values(argument: str, message: str) -> None:
+    result = run_cli(argument)
+    assert result.returncode != 0 and message in result.stderr
+    assert "Traceback" not in result.stderr
+
+
 def test_reproduce_paper_resumes_and_prints_the_table(tmp_path, paper_map_available) -> None:
     command = [
         sys.executable,
