@@ -7,6 +7,7 @@ keys are errors that name the key and the file or argument it came from.
 from __future__ import annotations
 
 import dataclasses
+import sys
 import typing
 from pathlib import Path
 from typing import Any, TypeVar
@@ -95,6 +96,19 @@ def load(cls: type[T], path: str | Path | None = None, overrides: list[str] = ()
         return build(cls, apply_overrides(values, list(overrides)), f"{where} + overrides")
     except TypeError as error:
         raise ValueError(f"bad override in {list(overrides)}: {error}") from error
+
+
+def load_or_exit(cls: type[T], path: str | Path | None, overrides: list[str]) -> T:
+    """:func:`load` for command lines: a bad file or override ends the script with one line
+    that names the script and the problem (no traceback).
+
+    Raises:
+        SystemExit: the config cannot be loaded.
+    """
+    try:
+        return load(cls, path, overrides)
+    except (ValueError, FileNotFoundError) as error:
+        raise SystemExit(f"{Path(sys.argv[0]).stem}: {error}") from error
 
 
 def _merge(base: dict[str, Any], update: dict[str, Any]) -> dict[str, Any]:

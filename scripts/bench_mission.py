@@ -21,7 +21,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from agents.cli import write_text_atomic  # noqa: E402
-from agents.configuration import as_dict, load  # noqa: E402
+from agents.configuration import as_dict, load_or_exit  # noqa: E402
 from agents.mission import MISSION_METHODS, MissionConfig, make_mission_policy, run_mission  # noqa: E402
 
 
@@ -38,7 +38,7 @@ def main() -> None:
     import torch
 
     torch.set_num_threads(1)
-    config = load(MissionConfig, args.config, args.overrides)
+    config = load_or_exit(MissionConfig, args.config, args.overrides)
     env = config.make_env()
     rows = []
     print(

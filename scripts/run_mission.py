@@ -23,7 +23,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from agents.cli import read_result, write_bytes_atomic, write_text_atomic  # noqa: E402
-from agents.configuration import as_dict, load  # noqa: E402
+from agents.configuration import as_dict, load_or_exit  # noqa: E402
 from agents.mission import (  # noqa: E402
     MissionConfig,
     MissionResult,
@@ -192,7 +192,7 @@ def main() -> None:
     import torch
 
     torch.set_num_threads(1)
-    config = load(MissionConfig, args.config, args.overrides)
+    config = load_or_exit(MissionConfig, args.config, args.overrides)
     out = Path(config.out)
     results = fly_all(config, out)
     summary = table(config, results)

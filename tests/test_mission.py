@@ -135,3 +135,9 @@ def test_run_mission_script(tmp_path: Path) -> None:
     assert refused.returncode != 0
     assert "gnn_0.json was made under another setup" in refused.stderr
     assert "model_sha256" in refused.stderr
+    # A bad override ends the script with one line naming it, before anything flies.
+    bad = subprocess.run(
+        args + ["seeds=ten"], capture_output=True, text=True, cwd=ROOT, timeout=300
+    )
+    assert bad.returncode != 0 and "Traceback" not in bad.stderr
+    assert bad.stderr.strip().endswith("MissionConfig.seeds must be an integer, got 'ten' (str)")
