@@ -1,12 +1,16 @@
-"""Helpers shared by the scripts and training loops: ``key=value`` values, atomic writes, and
-results that are read back on resume only when they were made under the same setup."""
+"""Helpers shared by the scripts and training loops: ``key=value`` values, argparse types for
+counts and seeds, atomic writes, and results that are read back on resume only when they were
+made under the same setup."""
 
 from __future__ import annotations
 
+import argparse
 import hashlib
 import json
+import math
 import os
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -28,6 +32,31 @@ def parse_value(text: str) -> Any:
         except ValueError:
             pass
     return text
+
+
+def positive_int(text: str) -> int:
+    """argparse type: an integer >= 1 (counts: robots, episodes, hops, steps)."""
+    return _checked(text, int, lambda value: value >= 1, "an integer >= 1")
+
+
+def non_negative_int(text: str) -> int:
+    """argparse type: an integer >= 0 (seeds)."""
+    return _checked(text, int, lambda value: value >= 0, "an integer >= 0")
+
+
+def positive_float(text: str) -> float:
+    """argparse type: a finite number > 0 (seconds)."""
+    return _checked(text, float, lambda value: 0 < value < math.inf, "a number > 0")
+
+
+def _checked(text: str, cast: type, accept: Callable[[Any], bool], expected: str) -> Any:
+    try:
+        value = cast(text)
+    except ValueError:
+        value = None
+    if value is None or not accept(value):
+        raise argparse.ArgumentTypeError(f"expected {expected}, got {text!r}")
+    return value
 
 
 def write_bytes_atomic(path: str | Path, data: bytes) -> Path:

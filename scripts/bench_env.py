@@ -28,6 +28,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from agents.cli import positive_float, positive_int  # noqa: E402
 from marl_cover import parallel_env  # noqa: E402
 
 CASES = {
@@ -148,7 +149,7 @@ def print_row(
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seconds", type=float, default=5.0)
+    parser.add_argument("--seconds", type=positive_float, default=5.0)
     parser.add_argument("--out", type=Path, default=Path("outputs/bench_env.json"))
     parser.add_argument(
         "--backend",
@@ -156,7 +157,9 @@ def main() -> None:
         choices=["auto", "numpy", "numba"],
         help="ego-graph builder (see CoverageConfig.ego_backend)",
     )
-    parser.add_argument("--num-envs", type=int, default=16, help="batched env size (case d)")
+    parser.add_argument(
+        "--num-envs", type=positive_int, default=16, help="batched env size (case d)"
+    )
     parser.add_argument("--skip-collectors", action="store_true", help="PettingZoo cases only")
     args = parser.parse_args()
     results = {}

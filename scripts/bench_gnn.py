@@ -25,7 +25,7 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from agents.cli import write_text_atomic  # noqa: E402
+from agents.cli import positive_int, write_text_atomic  # noqa: E402
 from agents.models import AggregationGNN, GNNConfig  # noqa: E402
 from agents.models.gnn import centralized_logits, decentralized_logits  # noqa: E402
 from marl_cover import parallel_env  # noqa: E402
@@ -88,10 +88,10 @@ def time_policy(model: AggregationGNN, pairs: list, mode: str, device: str) -> f
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--hops", nargs="+", type=int, default=list(range(3, 20, 2)))
-    parser.add_argument("--steps", type=int, default=100)
+    parser.add_argument("--hops", nargs="+", type=positive_int, default=list(range(3, 20, 2)))
+    parser.add_argument("--steps", type=positive_int, default=100)
     parser.add_argument("--device", default="cpu")
-    parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--threads", type=positive_int, default=1)
     parser.add_argument("--out", type=Path, default=Path("outputs/bench_gnn.json"))
     args = parser.parse_args()
     torch.set_num_threads(args.threads)

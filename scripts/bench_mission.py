@@ -20,7 +20,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from agents.cli import write_text_atomic  # noqa: E402
+from agents.cli import non_negative_int, write_text_atomic  # noqa: E402
 from agents.configuration import as_dict, load_or_exit  # noqa: E402
 from agents.mission import MISSION_METHODS, MissionConfig, make_mission_policy, run_mission  # noqa: E402
 
@@ -31,7 +31,7 @@ def main() -> None:
     parser.add_argument(
         "--methods", nargs="+", default=["greedy", "gnn", "expert"], choices=MISSION_METHODS
     )
-    parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1])
+    parser.add_argument("--seeds", nargs="+", type=non_negative_int, default=[0, 1])
     parser.add_argument("--out", type=Path, default=Path("outputs/bench_mission.json"))
     parser.add_argument("overrides", nargs="*")
     args = parser.parse_args()

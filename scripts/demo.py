@@ -22,6 +22,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from agents.cli import non_negative_int, positive_int  # noqa: E402
 from agents.evaluation import evaluate  # noqa: E402
 from agents.greedy import GreedyPolicy  # noqa: E402
 from marl_cover import parallel_env  # noqa: E402
@@ -88,13 +89,13 @@ def animate(env_kwargs: dict[str, Any], policy: Any, seed: int, path: Path) -> N
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--task", choices=["coverage", "exploration"], default="coverage")
-    parser.add_argument("--episodes", type=int, default=10)
-    parser.add_argument("--robots", type=int, default=4)
-    parser.add_argument("--city-size", type=int, default=228)
+    parser.add_argument("--episodes", type=positive_int, default=10)
+    parser.add_argument("--robots", type=positive_int, default=4)
+    parser.add_argument("--city-size", type=positive_int, default=228)
     parser.add_argument(
         "--expert-iterations", type=int, default=800, help="PyVRP iterations per plan"
     )
-    parser.add_argument("--seed", type=int, default=1000, help="first city seed")
+    parser.add_argument("--seed", type=non_negative_int, default=1000, help="first city seed")
     parser.add_argument("--out", type=Path, default=Path("outputs/demo"))
     args = parser.parse_args()
     model = load_gnn(args.task)

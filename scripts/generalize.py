@@ -21,7 +21,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from agents.cli import file_sha256, read_result, write_text_atomic  # noqa: E402
+from agents.cli import file_sha256, non_negative_int, positive_int, read_result, write_text_atomic  # noqa: E402
 from agents.evaluation import evaluate  # noqa: E402
 from agents.greedy import GreedyPolicy  # noqa: E402
 from agents.paper import paper_numbers  # noqa: E402
@@ -82,9 +82,9 @@ def main() -> None:
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--task", choices=TASKS, default="coverage")
-    parser.add_argument("--robots", nargs="+", type=int, default=TEAMS)
-    parser.add_argument("--episodes", type=int, default=100)
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--robots", nargs="+", type=positive_int, default=TEAMS)
+    parser.add_argument("--episodes", type=positive_int, default=100)
+    parser.add_argument("--seed", type=non_negative_int, default=0)
     parser.add_argument("--checkpoint", type=Path, default=None)
     parser.add_argument("--out", type=Path, default=Path("outputs/generalize"))
     parser.add_argument(

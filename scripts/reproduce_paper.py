@@ -28,7 +28,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from agents.cli import write_text_atomic  # noqa: E402
+from agents.cli import non_negative_int, positive_float, positive_int, write_text_atomic  # noqa: E402
 from agents.evaluation import evaluate  # noqa: E402
 from agents.greedy import GreedyPolicy  # noqa: E402
 from agents.paper import paper_numbers  # noqa: E402
@@ -104,11 +104,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--task", choices=TASKS, default="coverage")
     parser.add_argument("--methods", nargs="+", default=list(METHODS), choices=list(METHODS))
-    parser.add_argument("--hops", nargs="+", type=int, default=HOPS)
-    parser.add_argument("--episodes", type=int, default=100)
-    parser.add_argument("--seed", type=int, default=0, help="first episode seed")
+    parser.add_argument("--hops", nargs="+", type=positive_int, default=HOPS)
+    parser.add_argument("--episodes", type=positive_int, default=100)
+    parser.add_argument("--seed", type=non_negative_int, default=0, help="first episode seed")
     parser.add_argument("--backend", default="pyvrp", choices=["pyvrp", "ortools"])
-    parser.add_argument("--expert-time-limit", type=float, default=0.15)
+    parser.add_argument("--expert-time-limit", type=positive_float, default=0.15)
     parser.add_argument("--out", type=Path, default=Path("outputs/paper"))
     parser.add_argument("--models", type=Path, default=Path("outputs/bc"), help="GNN runs")
     parser.add_argument("--table-only", action="store_true")

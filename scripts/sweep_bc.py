@@ -18,6 +18,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from agents import configuration  # noqa: E402
+from agents.cli import positive_int  # noqa: E402
 from agents.training.bc import BCConfig, train_bc  # noqa: E402
 
 DEFAULT_CONFIG = Path(__file__).resolve().parent.parent / "configs" / "bc_coverage.yaml"
@@ -26,7 +27,7 @@ DEFAULT_CONFIG = Path(__file__).resolve().parent.parent / "configs" / "bc_covera
 def main(argv: list[str]) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--kinds", nargs="+", default=["linear", "nonlinear"])
-    parser.add_argument("--hops", nargs="+", type=int, default=list(range(3, 20, 2)))
+    parser.add_argument("--hops", nargs="+", type=positive_int, default=list(range(3, 20, 2)))
     parser.add_argument("--config", default=str(DEFAULT_CONFIG))
     parser.add_argument("--out", type=Path, default=Path("outputs/bc"))
     parser.add_argument("overrides", nargs="*")

@@ -1,7 +1,9 @@
-"""The scripts' helpers: ``key=value`` values, atomic writes, setup-checked resume."""
+"""The scripts' helpers: ``key=value`` values, argparse types, atomic writes, setup-checked
+resume."""
 
 from __future__ import annotations
 
+import argparse
 import json
 from pathlib import Path
 
@@ -9,7 +11,10 @@ import pytest
 
 from agents.cli import (
     file_sha256,
+    non_negative_int,
     parse_value,
+    positive_float,
+    positive_int,
     read_result,
     write_bytes_atomic,
     write_text_atomic,
@@ -24,6 +29,20 @@ def test_parse_value() -> None:
     assert parse_value("[greedy,gnn]") == ["greedy", "gnn"]
     assert parse_value("[1, 2.5]") == [1, 2.5] and parse_value("[]") == []
     assert parse_value("outputs/run") == "outputs/run"
+
+
+def test_argparse_types_name_the_expectation() -> None:
+    assert positive_int("3") == 3 and non_negative_int("0") == 0 and positive_float("0.5") == 0.5
+    for parse, text, expected in [
+        (positive_int, "0", "an integer >= 1, got '0'"),
+        (positive_int, "2.5", "an integer >= 1, got '2.5'"),
+        (non_negative_int, "-1", "an integer >= 0, got '-1'"),
+        (positive_float, "0", "a number > 0, got '0'"),
+        (positive_float, "inf", "a number > 0, got 'inf'"),
+        (positive_float, "soon", "a number > 0, got 'soon'"),
+    ]:
+        with pytest.raises(argparse.ArgumentTypeError, match=f"expected {expected}"):
+            parse(text)
 
 
 def test_atomic_writes_leave_no_temporary_file(tmp_path: Path) -> None:
