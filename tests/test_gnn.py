@@ -126,6 +126,20 @@ def test_parameter_count_matches_the_paper_shape() -> None:
     assert count == (4 * 16 + 16 + 2 * 272) + (16 + 16 + 2 * 272) + 3 * 272 + (20 * 16 + 1)
 
 
+def test_per_hop_blocks_have_their_own_weights() -> None:
+    shared = AggregationGNN(GNNConfig(hops=5, hidden=8))
+    per_hop = AggregationGNN(GNNConfig(hops=5, hidden=8, per_hop=True))
+    block = sum(p.numel() for p in shared.edge_block.parameters())
+    node = sum(p.numel() for p in shared.node_block.parameters())
+    extra = sum(p.numel() for p in per_hop.parameters()) - sum(
+        p.numel() for p in shared.parameters()
+    )
+    assert extra == 4 * block + 3 * node  # 5 edge blocks and 4 node blocks instead of 1 + 1
+    assert per_hop.blocks(0)[0] is not per_hop.blocks(1)[0] and per_hop.blocks(4)[1] is None
+    with pytest.raises(ValueError, match="per_hop applies to the non-linear model only"):
+        GNNConfig(kind="linear", per_hop=True)
+
+
 @pytest.mark.parametrize(
     "config",
     [
@@ -134,6 +148,8 @@ def test_parameter_count_matches_the_paper_shape() -> None:
         GNNConfig(kind="nonlinear", hops=1),
         GNNConfig(kind="nonlinear", hops=6),
         GNNConfig(kind="nonlinear", hops=4, residual=True, hidden=8),
+        GNNConfig(kind="nonlinear", hops=5, per_hop=True, hidden=8),
+        GNNConfig(kind="nonlinear", hops=1, per_hop=True),
     ],
     ids=str,
 )

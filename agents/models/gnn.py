@@ -7,7 +7,7 @@ Two models (``GNNConfig.kind``):
   incoming edges' latents), an edge decoder applied after every step.
 - ``"nonlinear"``: the same encoder and decoder around ``hops`` applications of one shared
   graph-network block: an edge MLP on ``[e, h_receiver, h_sender]`` and a node MLP on
-  ``[mean of incoming edges, h]``.
+  ``[mean of incoming edges, h]`` (``per_hop``: a block of its own for each hop).
 
 The decoded edge latents of every stage are concatenated and a linear readout gives one logit
 per edge; a robot's action logits are those of its five action edges (target -> robot), and a
@@ -49,6 +49,8 @@ class GNNConfig:
         edge_features: Input edge features.
         residual: Non-linear model only: add each block's output to its input latents (off in
             the paper).
+        per_hop: Non-linear model only: a block of its own for each hop instead of one block
+            applied ``hops`` times (off in the paper; ``hops`` times the block parameters).
     """
 
     kind: str = "nonlinear"
@@ -58,6 +60,7 @@ class GNNConfig:
     node_features: int = NUM_NODE_FEATURES
     edge_features: int = 1
     residual: bool = False
+    per_hop: bool = False
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
@@ -66,6 +69,8 @@ class GNNConfig:
             raise ValueError("hops, hidden and mlp_layers must be >= 1")
         if self.residual and self.kind == "linear":
             raise ValueError("residual applies to the non-linear model only")
+        if self.per_hop and self.kind == "linear":
+            raise ValueError("per_hop applies to the non-linear model only")
 
 
 def mlp(inputs: int, hidden: int, layers: int) -> nn.Sequential:
@@ -113,12 +118,24 @@ class AggregationGNN(nn.Module):
         self.node_encoder = mlp(config.node_features, h, layers)
         self.edge_encoder = mlp(config.edge_features, h, layers)
         self.edge_decoder = mlp(h, h, layers)
-        if config.kind == "nonlinear":
+        if config.kind == "nonlinear" and config.per_hop:
+            # the last hop's node update reaches no output, so it has no block
+            self.edge_blocks = nn.ModuleList(mlp(3 * h, h, layers) for _ in range(config.hops))
+            self.node_blocks = nn.ModuleList(mlp(2 * h, h, layers) for _ in range(config.hops - 1))
+        elif config.kind == "nonlinear":
             self.edge_block = mlp(3 * h, h, layers)
             self.node_block = mlp(2 * h, h, layers)
         self.readout = nn.Linear((config.hops + 1) * h, 1)
         nn.init.orthogonal_(self.readout.weight)
         nn.init.zeros_(self.readout.bias)
+
+    def blocks(self, hop: int) -> tuple[nn.Sequential, nn.Sequential | None]:
+        """The non-linear model's edge and node MLPs at ``hop`` (no node MLP after the last hop
+        with ``per_hop``)."""
+        if not self.config.per_hop:
+            return self.edge_block, self.node_block
+        node_block = self.node_blocks[hop] if hop < self.config.hops - 1 else None
+        return self.edge_blocks[hop], node_block
 
     def forward(
         self,
@@ -184,10 +201,6 @@ class AggregationGNN(nn.Module):
         num_nodes, hidden = nodes.shape[0], self.config.hidden
         degree = torch.bincount(receivers, minlength=num_nodes).clamp(min=1)
         inverse_degree = (1.0 / degree.to(nodes.dtype)).unsqueeze(1)
-        edge_first, node_first = self.edge_block[0], self.node_block[0]
-        w_edge, w_receiver, w_sender = edge_first.weight.split(hidden, dim=1)
-        w_node_pair = torch.cat([w_receiver, w_sender], dim=0)  # (2H, H)
-        w_aggregate, w_self = node_first.weight.split(hidden, dim=1)
         # row 2 i of the (2 V, H) view of h @ [W_receiver; W_sender]^T is node i's receiver part,
         # row 2 i + 1 its sender part: one gather per hop fetches both for every edge
         pair_rows = torch.stack([2 * receivers, 2 * senders + 1])  # (2, E)
@@ -197,19 +210,23 @@ class AggregationGNN(nn.Module):
         e = self.edge_encoder(edge_attr)
         stages = [e[out_edges]]
         for hop in range(self.config.hops):
+            edge_block, node_block = self.blocks(hop)
+            w_edge, w_receiver, w_sender = edge_block[0].weight.split(hidden, dim=1)
+            w_node_pair = torch.cat([w_receiver, w_sender], dim=0)  # (2H, H)
             pair = functional.linear(h, w_node_pair).view(2 * num_nodes, hidden)
             gathered = pair.index_select(0, pair_rows).view(2, num_edges, hidden)
-            first = torch.addmm(edge_first.bias, e, w_edge.t())
+            first = torch.addmm(edge_block[0].bias, e, w_edge.t())
             first += gathered[0]
             first += gathered[1]
-            e_new = _tail(self.edge_block, first)
+            e_new = _tail(edge_block, first)
             e = e_new + e if self.config.residual else e_new
             stages.append(e.index_select(0, out_edges))
             if hop == self.config.hops - 1:
                 break  # the last node update reaches no output
+            w_aggregate, w_self = node_block[0].weight.split(hidden, dim=1)
             aggregate = mean_aggregate(e_new, receivers, num_nodes, inverse_degree)
-            first = torch.addmm(node_first.bias, aggregate, w_aggregate.t())
-            h_new = _tail(self.node_block, torch.addmm(first, h, w_self.t()))
+            first = torch.addmm(node_block[0].bias, aggregate, w_aggregate.t())
+            h_new = _tail(node_block, torch.addmm(first, h, w_self.t()))
             h = h_new + h if self.config.residual else h_new
         return stages
 
@@ -224,18 +241,18 @@ class AggregationGNN(nn.Module):
         h = self.node_encoder(nodes)
         e = self.edge_encoder(edge_attr)
         stages = [self.edge_decoder(e)]
-        for _ in range(self.config.hops):
+        for hop in range(self.config.hops):
             if self.config.kind == "linear":
                 e = h[senders]
                 h = mean_aggregate(e, receivers, num_nodes, inverse_degree)
             else:
-                e_new = self.edge_block(torch.cat([e, h[receivers], h[senders]], dim=1))
-                h_new = self.node_block(
-                    torch.cat([mean_aggregate(e_new, receivers, num_nodes, inverse_degree), h], 1)
-                )
-                if self.config.residual:
-                    e_new, h_new = e_new + e, h_new + h
-                e, h = e_new, h_new
+                edge_block, node_block = self.blocks(hop)
+                e_new = edge_block(torch.cat([e, h[receivers], h[senders]], dim=1))
+                e = e_new + e if self.config.residual else e_new
+                if node_block is not None:
+                    aggregate = mean_aggregate(e_new, receivers, num_nodes, inverse_degree)
+                    h_new = node_block(torch.cat([aggregate, h], 1))
+                    h = h_new + h if self.config.residual else h_new
             stages.append(self.edge_decoder(e))
         return self.readout(torch.cat(stages, dim=1)).squeeze(1)
 
