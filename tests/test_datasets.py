@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -105,3 +106,75 @@ def test_bad_shard_is_named(tmp_path) -> None:
         load_dataset(tmp_path)
     with pytest.raises(FileNotFoundError, match="no dataset shards"):
         load_dataset(tmp_path / "empty")
+
+
+class _CentralGreedy:
+    """Centralized greedy as a recorder (``act_env``) and a relabeller."""
+
+    def __init__(self, hops: int) -> None:
+        from agents.greedy import CentralizedGreedyPolicy
+
+        self.greedy = CentralizedGreedyPolicy(hops)
+
+    def act_env(self, env) -> dict[str, int]:  # noqa: ANN001
+        return dict(zip(env.possible_agents, self.relabel(env, 0).tolist(), strict=True))
+
+    def relabel(self, env, step: int) -> np.ndarray:  # noqa: ANN001
+        return np.asarray(self.greedy.act_state(env.state()))
+
+
+def test_label_agreement_replays_recorded_states() -> None:
+    from agents.label_agreement import label_agreement
+
+    env = marl_cover.parallel_env(city_size=100, num_robots=3, hops=6, max_steps=12)
+    greedy = _CentralGreedy(6)
+    episodes = [record_episode(env, greedy, seed) for seed in (4, 5)]
+    # A Markov labeller agrees with itself on every replayed state ...
+    same = label_agreement(env, episodes, greedy.relabel, 4, np.random.default_rng(0), bucket=5)
+    assert (same.agreed, same.total, same.fraction) == (24, 24, 1.0)
+    assert sum(total for _, total in same.by_step.values()) == 24
+    assert set(same.by_step) <= {0, 5, 10}
+    # ... and a labeller that always differs never does; episodes shorter than the sample
+    # are taken whole.
+    steps_seen = []
+
+    def other(env, step: int) -> np.ndarray:  # noqa: ANN001
+        steps_seen.append(step)
+        return (greedy.relabel(env, step) + 1) % 5
+
+    none = label_agreement(env, episodes, other, 50, np.random.default_rng(0))
+    assert (none.agreed, none.total) == (0, 3 * sum(e.num_steps for e in episodes))
+    assert steps_seen == list(range(episodes[0].num_steps)) + list(range(episodes[1].num_steps))
+    # Replaying under other settings is an error that names the episode.
+    other_env = marl_cover.parallel_env(city_size=101, num_robots=3, hops=6, max_steps=12)
+    with pytest.raises(ValueError, match="episode seed 4 left its recorded positions"):
+        label_agreement(other_env, episodes, greedy.relabel, 4, np.random.default_rng(0))
+
+
+def test_label_agreement_script(tmp_path) -> None:
+    """Relabels the validation states of a small dataset with the dataset's expert settings."""
+    data = tmp_path / "data"
+    assert collect(data).returncode == 0
+    config = tmp_path / "bc.yaml"
+    config.write_text(f"dataset: {data}\nholdout_seeds: [100, 100]\nval_fraction: 0.5\n")
+    out = tmp_path / "agreement.json"
+    command = [sys.executable, str(ROOT / "scripts" / "label_agreement.py"), "--config"]
+    done = subprocess.run(
+        [*command, str(config), "--states", "3", "--out", str(out)],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=600,
+    )
+    assert done.returncode == 0, done.stderr
+    record = json.loads(out.read_text())
+    assert len(record["episodes"]) == 2 and record["total"] == 2 * 3 * 4  # 4 robots
+    assert record["expert"] == {"backend": "pyvrp", "time_limit": 0.5, "iterations": 100}
+    buckets = list(record["by_step"].values())
+    assert [sum(b[0] for b in buckets), sum(b[1] for b in buckets)] == [
+        record["agreed"],
+        record["total"],
+    ]
+    assert record["agreement"] == record["agreed"] / record["total"]
+    rows = [line.split() for line in done.stdout.splitlines()]
+    assert ["all", str(record["agreed"]), str(record["total"])] in [row[:3] for row in rows]

@@ -1,0 +1,99 @@
+"""How often a fresh expert plan from a recorded state reproduces the dataset's label.
+
+    python scripts/label_agreement.py                      # BC's validation episodes, 5 states each
+    python scripts/label_agreement.py --episodes 40 --states 5 --out outputs/label_agreement.json
+
+The states are those of behaviour cloning's validation split (``configs/bc_coverage.yaml``
+unless ``--config``), the labels those recorded in the dataset; each sampled state is relabelled
+by a new routing expert with the dataset's settings (``meta.json``: backend, iterations, time
+limit) and another solver seed, planning from that state. The agreement bounds how well any
+policy of the state can match the labels (the BC log's ``val_accuracy`` is the model's figure
+on the same episodes). Prints a table by step and writes JSON atomically.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from agents.cli import non_negative_int, positive_int, write_text_atomic  # noqa: E402
+from agents.configuration import load_or_exit  # noqa: E402
+from agents.label_agreement import label_agreement  # noqa: E402
+from agents.training.bc import BCConfig, split_episodes  # noqa: E402
+from marl_cover import parallel_env  # noqa: E402
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--config", type=Path, default=Path("configs/bc_coverage.yaml"))
+    parser.add_argument("--episodes", type=positive_int, default=40, help="validation episodes")
+    parser.add_argument("--states", type=positive_int, default=5, help="states per episode")
+    parser.add_argument("--seed", type=non_negative_int, default=0, help="chooses the states")
+    parser.add_argument("--solver-seed", type=non_negative_int, default=12345)
+    parser.add_argument("--out", type=Path, default=Path("outputs/label_agreement.json"))
+    args = parser.parse_args()
+    config = load_or_exit(BCConfig, args.config, [])
+    meta_path = Path(config.dataset) / "meta.json"
+    if not meta_path.is_file():
+        raise SystemExit(f"label_agreement: no {meta_path} (the dataset's settings)")
+    meta = json.loads(meta_path.read_text())
+    options = meta["options"]
+    if options.get("mode", "open_loop") != "open_loop":
+        raise SystemExit(f"label_agreement: {meta_path} is not an open-loop dataset")
+    _, validation = split_episodes(config)
+    episodes = validation[: args.episodes]
+    env = parallel_env(**meta.get("env", {}))
+
+    from agents.experts import RoutingExpert
+
+    def relabel(env, step: int) -> np.ndarray:  # noqa: ANN001
+        expert = RoutingExpert(
+            backend=options.get("backend", "pyvrp"),
+            time_limit=options.get("time_limit", 0.5),
+            max_iterations=options.get("iterations") or None,
+            seed=args.solver_seed + step,
+        )
+        return expert.act_snapshot(env.snapshot())
+
+    start = time.perf_counter()
+
+    def progress(done: int) -> None:
+        if sys.stderr.isatty() or done % 10 == 0 or done == len(episodes):
+            end = "" if sys.stderr.isatty() else "\n"
+            print(f"\r{done}/{len(episodes)} episodes", end=end, file=sys.stderr, flush=True)
+
+    result = label_agreement(
+        env, episodes, relabel, args.states, np.random.default_rng(args.seed), progress=progress
+    )
+    if sys.stderr.isatty():
+        print(file=sys.stderr)
+    print(f"{'steps':>8s} {'agreed':>7s} {'of':>5s} {'fraction':>9s}")
+    for first, (agreed, total) in result.by_step.items():
+        print(f"{first:3d}..{first + 9:<3d} {agreed:7d} {total:5d} {agreed / total:9.3f}")
+    print(f"{'all':>8s} {result.agreed:7d} {result.total:5d} {result.fraction:9.3f}")
+    record = {
+        "dataset": config.dataset,
+        "episodes": [e.seed for e in episodes],
+        "states_per_episode": args.states,
+        "seed": args.seed,
+        "solver_seed": args.solver_seed,
+        "expert": {k: options.get(k) for k in ("backend", "time_limit", "iterations")},
+        "agreement": result.fraction,
+        "agreed": result.agreed,
+        "total": result.total,
+        "by_step": result.by_step,
+        "seconds": round(time.perf_counter() - start, 1),
+    }
+    write_text_atomic(args.out, json.dumps(record, indent=1))
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
