@@ -1,14 +1,17 @@
-"""How often a fresh expert plan from a recorded state reproduces the dataset's label.
+"""How often a fresh expert plan (or a model) at a recorded state reproduces the dataset's label.
 
     python scripts/label_agreement.py                      # BC's validation episodes, 5 states each
     python scripts/label_agreement.py --episodes 40 --states 5 --out outputs/label_agreement.json
+    python scripts/label_agreement.py --relabel gnn --out outputs/label_agreement_gnn.json
 
 The states are those of behaviour cloning's validation split (``configs/bc_coverage.yaml``
 unless ``--config``), the labels those recorded in the dataset; each sampled state is relabelled
 by a new routing expert with the dataset's settings (``meta.json``: backend, iterations, time
 limit) and another solver seed, planning from that state. The agreement bounds how well any
-policy of the state can match the labels (the BC log's ``val_accuracy`` is the model's figure
-on the same episodes). Prints a table by step and writes JSON atomically.
+policy of the state can match the labels. ``--relabel gnn`` asks a model instead (argmax of one
+pass over ``state()``; ``--checkpoint``, by default the shipped behaviour-cloned model): the
+same states, so the two tables compare line by line. Prints a table by step and writes JSON
+atomically.
 """
 
 from __future__ import annotations
@@ -29,6 +32,39 @@ from agents.label_agreement import label_agreement  # noqa: E402
 from agents.training.bc import BCConfig, split_episodes  # noqa: E402
 from marl_cover import parallel_env  # noqa: E402
 
+BC_MODEL = "agents/models/shipped/bc/coverage_gnn.pt"
+
+
+def expert_relabel(options: dict, solver_seed: int):  # noqa: ANN201
+    """A new routing expert with the dataset's settings plans from each state."""
+    from agents.experts import RoutingExpert
+
+    def relabel(env, step: int) -> np.ndarray:  # noqa: ANN001
+        expert = RoutingExpert(
+            backend=options.get("backend", "pyvrp"),
+            time_limit=options.get("time_limit", 0.5),
+            max_iterations=options.get("iterations") or None,
+            seed=solver_seed + step,
+        )
+        return expert.act_snapshot(env.snapshot())
+
+    return relabel
+
+
+def gnn_relabel(checkpoint: Path):  # noqa: ANN201
+    """The model's argmax actions from one pass over ``state()``."""
+    import torch
+
+    from agents.models.policy import GNNPolicy, load_model
+
+    torch.set_num_threads(1)
+    try:
+        model, _ = load_model(checkpoint)
+    except (FileNotFoundError, ValueError) as error:
+        raise SystemExit(f"label_agreement: {error}") from error
+    policy = GNNPolicy(model, centralized=True)
+    return lambda env, step: policy.act_state(env.state())
+
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -37,6 +73,8 @@ def main() -> None:
     parser.add_argument("--states", type=positive_int, default=5, help="states per episode")
     parser.add_argument("--seed", type=non_negative_int, default=0, help="chooses the states")
     parser.add_argument("--solver-seed", type=non_negative_int, default=12345)
+    parser.add_argument("--relabel", choices=("expert", "gnn"), default="expert")
+    parser.add_argument("--checkpoint", type=Path, default=Path(BC_MODEL), help="--relabel gnn")
     parser.add_argument("--out", type=Path, default=Path("outputs/label_agreement.json"))
     args = parser.parse_args()
     config = load_or_exit(BCConfig, args.config, [])
@@ -51,16 +89,9 @@ def main() -> None:
     episodes = validation[: args.episodes]
     env = parallel_env(**meta.get("env", {}))
 
-    from agents.experts import RoutingExpert
-
-    def relabel(env, step: int) -> np.ndarray:  # noqa: ANN001
-        expert = RoutingExpert(
-            backend=options.get("backend", "pyvrp"),
-            time_limit=options.get("time_limit", 0.5),
-            max_iterations=options.get("iterations") or None,
-            seed=args.solver_seed + step,
-        )
-        return expert.act_snapshot(env.snapshot())
+    relabel = expert_relabel(options, args.solver_seed)
+    if args.relabel == "gnn":
+        relabel = gnn_relabel(args.checkpoint)
 
     start = time.perf_counter()
 
@@ -83,7 +114,9 @@ def main() -> None:
         "episodes": [e.seed for e in episodes],
         "states_per_episode": args.states,
         "seed": args.seed,
-        "solver_seed": args.solver_seed,
+        "relabel": args.relabel,
+        "solver_seed": args.solver_seed if args.relabel == "expert" else None,
+        "checkpoint": str(args.checkpoint) if args.relabel == "gnn" else None,
         "expert": {k: options.get(k) for k in ("backend", "time_limit", "iterations")},
         "agreement": result.fraction,
         "agreed": result.agreed,

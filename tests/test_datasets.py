@@ -178,3 +178,17 @@ def test_label_agreement_script(tmp_path) -> None:
     assert record["agreement"] == record["agreed"] / record["total"]
     rows = [line.split() for line in done.stdout.splitlines()]
     assert ["all", str(record["agreed"]), str(record["total"])] in [row[:3] for row in rows]
+    # The shipped BC model on the same states: the same sampled states, its own agreement.
+    gnn_out = tmp_path / "gnn.json"
+    done = subprocess.run(
+        [*command, str(config), "--states", "3", "--relabel", "gnn", "--out", str(gnn_out)],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=600,
+    )
+    assert done.returncode == 0, done.stderr
+    gnn = json.loads(gnn_out.read_text())
+    assert gnn["relabel"] == "gnn" and gnn["checkpoint"].endswith("bc/coverage_gnn.pt")
+    assert gnn["episodes"] == record["episodes"] and gnn["total"] == record["total"]
+    assert [b[1] for b in gnn["by_step"].values()] == [b[1] for b in buckets]
