@@ -14,7 +14,8 @@ key                                    shape            meaning
 =====================================  ===============  ==========================================
 ``("robot", "observation", k)``        ``(N, R, ...)``  each robot's padded ego-graph, ``k`` in
                                                         ``nodes, node_pos, node_mask, edge_index,
-                                                        edge_attr, edge_mask`` (omitted with
+                                                        edge_attr, edge_mask``, and its clock
+                                                        ``steps_left (N, R)`` (omitted with
                                                         ``observe_robots=False``)
 ``("robot", "action_mask")``           ``(N, R, 5)``    bool, the robots' action masks
 ``("robot", "action")``                ``(N, R)``       int64 action in ``[0, 5)``
@@ -51,6 +52,8 @@ from marl_cover.env import CoverageEnv
 
 #: Padded graph arrays of an observation (``action_mask`` is kept apart, as a bool).
 GRAPH_ARRAYS = ("nodes", "node_pos", "node_mask", "edge_index", "edge_attr", "edge_mask")
+#: Keys of ``("robot", "observation", k)``.
+OBSERVATION_KEYS = (*GRAPH_ARRAYS, "steps_left")
 #: Per-robot ``infos`` entries and their dtypes.
 INFO_KEYS = {
     "new_interest": torch.int64,
@@ -135,9 +138,11 @@ class BatchedCoverageEnv(EnvBase):
             ),
         }
         if self.observe_robots:
-            group["observation"] = Composite(
-                graph_specs(core._ego_shape, (n, r), device), shape=(n, r)
+            observation = graph_specs(core._ego_shape, (n, r), device)
+            observation["steps_left"] = Bounded(
+                0, core.config.max_steps, shape=(n, r), dtype=torch.int64, device=device
             )
+            group["observation"] = Composite(observation, shape=(n, r))
         state = graph_specs(core._state_shape, (n,), device)
         state["robot_nodes"] = Bounded(
             0, core._state_shape.max_nodes - 1, shape=(n, r), dtype=torch.int64, device=device
@@ -243,7 +248,7 @@ class BatchedCoverageEnv(EnvBase):
         row["action_mask"] = state["action_mask"].astype(bool)
         if self.observe_robots:
             ego = env.observe_batch()
-            row.update({f"obs.{k}": ego[k] for k in GRAPH_ARRAYS})
+            row.update({f"obs.{k}": ego[k] for k in OBSERVATION_KEYS})
         return row
 
     def _merge(self, rows: dict[int, dict[str, np.ndarray]], reset: bool) -> dict[str, np.ndarray]:
@@ -279,7 +284,8 @@ class BatchedCoverageEnv(EnvBase):
         )
         if self.observe_robots:
             group["observation"] = TensorDict(
-                {k: torch.from_numpy(out[f"obs.{k}"]) for k in GRAPH_ARRAYS}, batch_size=(n, r)
+                {k: torch.from_numpy(out[f"obs.{k}"]) for k in OBSERVATION_KEYS},
+                batch_size=(n, r),
             )
         state = TensorDict(
             {k: torch.from_numpy(out[f"state.{k}"]) for k in STATE_KEYS},

@@ -81,18 +81,23 @@ class Episode:
         shape: PaddedShape,
         backend: str = "numpy",
         sensor_range: float | None = None,
+        max_steps: int | None = None,
     ) -> dict[str, np.ndarray]:
         """Every robot's ego-observation before action ``step``, stacked over robots
-        (exploration when ``sensor_range`` is given)."""
+        (exploration when ``sensor_range`` is given; with ``max_steps``, the actions per episode,
+        the clock ``steps_left`` too)."""
         features = waypoint_features(self.interest & ~self.visited(step))
         neighbors = None
         if sensor_range is not None:
             discovered = self.discovery_steps(sensor_range) <= step
             features[:, 3] = frontier_of(self.graph, discovered)
             neighbors = known_neighbors(self.graph, discovered)
-        return build_ego_graphs(
+        batch = build_ego_graphs(
             self.graph, self.robot_node[step], features, hops, shape, backend, neighbors
         )
+        if max_steps is not None:
+            batch["steps_left"] = np.full(len(self.robot_node[step]), max_steps - step, np.int64)
+        return batch
 
 
 def record_episode(env: CoverageEnv, policy, seed: int) -> Episode:  # noqa: ANN001

@@ -29,7 +29,8 @@ is a body (:mod:`marl_cover.dynamics`) that flies to the waypoint it is given:
   the count of such encounters is in ``infos[agent]["near_misses"]``.
 - **Time.** The episode is truncated after ``max_time`` seconds (``CoverageConfig.max_steps``
   is not used); ``infos[agent]["time"]`` is the mission time, and ``state()["steps_left"]``
-  counts the nominal moves left (:meth:`QuadrotorCoverageEnv.snapshot`).
+  and each observation's ``steps_left`` count the nominal moves left
+  (:meth:`QuadrotorCoverageEnv.snapshot`).
 
 With infinite speed and acceleration (:meth:`QuadrotorParams.ideal`) every move takes one
 integration step and this environment reproduces the discrete one step for step (tested).
@@ -202,9 +203,11 @@ class QuadrotorCoverageEnv(CoverageEnv):
             dynamics = DynamicsConfig.from_dict(dynamics)
         self.dynamics = dynamics or DynamicsConfig()
         self._locator: WaypointLocator | None = None
+        self._tick = 0  # integration steps of the mission (the clock)
         # nominal moves (see snapshot) are at least a control period long
         most = math.ceil(self.dynamics.max_time / self.dynamics.control_period)
         self.state_space["steps_left"] = gymnasium.spaces.Box(0, most, (), np.int64)
+        self._observation_space["steps_left"] = gymnasium.spaces.Box(0, most, (), np.int64)
 
     # ------------------------------------------------------------------ public state
     @property

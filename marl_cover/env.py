@@ -46,6 +46,7 @@ key             shape            dtype    meaning
                                           ego robot's action edge of slot ``k`` (target ->
                                           robot, robot -> target), real iff the slot exists
 ``action_mask`` ``(5,)``         int8     1 where the action leads to a waypoint
+``steps_left``  ``()``           int64    actions left in the episode (the team's clock)
 ==============  ===============  =======  ==================================================
 
 The ego-graph holds every node within ``hops`` hops of the ego robot in the graph of robots
@@ -222,7 +223,13 @@ class CoverageEnv(ParallelEnv):
             self._map_source.max_waypoints, self._map_source.max_waypoint_edges, base.num_robots
         )
         action_mask = gymnasium.spaces.Box(0, 1, (NUM_ACTIONS,), np.int8)
-        self._observation_space = graph_space(self._ego_shape, {"action_mask": action_mask})
+        self._observation_space = graph_space(
+            self._ego_shape,
+            {
+                "action_mask": action_mask,
+                "steps_left": gymnasium.spaces.Box(0, base.max_steps, (), np.int64),
+            },
+        )
         self._action_spaces = {
             a: gymnasium.spaces.Discrete(NUM_ACTIONS) for a in self.possible_agents
         }
@@ -517,7 +524,7 @@ class CoverageEnv(ParallelEnv):
     def observe_batch(self) -> dict[str, np.ndarray]:
         """Every robot's observation stacked on a leading robot axis (fresh arrays)."""
         self._require_episode()
-        return build_ego_graphs(
+        batch = build_ego_graphs(
             self._graph,
             self._robot_node,
             self._waypoint_features,
@@ -526,6 +533,8 @@ class CoverageEnv(ParallelEnv):
             self._ego_backend,
             None if self._discovery is None else self._discovery.neighbors,
         )
+        batch["steps_left"] = np.full(len(self._robot_node), self._steps_left(), dtype=np.int64)
+        return batch
 
     def state(self) -> dict[str, np.ndarray]:
         """The whole graph in the observation encoding (see the module docstring)."""

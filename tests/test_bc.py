@@ -48,12 +48,15 @@ def record(seeds: range, **env_overrides):  # noqa: ANN201
     return [record_episode(env, GreedyRecorder(env.config.hops), seed) for seed in seeds]
 
 
-@pytest.mark.parametrize("task", ["coverage", "exploration"])
-def test_collated_batches_are_the_environment_states(task: str) -> None:
+@pytest.mark.parametrize(
+    ("task", "time_horizon"), [("coverage", None), ("exploration", None), ("coverage", 40)]
+)
+def test_collated_batches_are_the_environment_states(task: str, time_horizon: int | None) -> None:
     """One flat graph of sampled transitions gives each state's centralized logits (in
-    exploration: of the discovered graph, rebuilt from the recorded positions)."""
+    exploration: of the discovered graph, rebuilt from the recorded positions; with a
+    ``time_horizon``, the clock of the state too)."""
     torch.manual_seed(0)
-    model = AggregationGNN(GNNConfig(kind="nonlinear", hops=3))
+    model = AggregationGNN(GNNConfig(kind="nonlinear", hops=3, time_horizon=time_horizon))
     episodes = record(range(3), num_robots=3, task=task)
     max_nodes = max(e.graph.num_nodes for e in episodes) + 5  # padding must not matter
     table = GraphTable([e.graph for e in episodes], max_nodes)
@@ -63,9 +66,15 @@ def test_collated_batches_are_the_environment_states(task: str) -> None:
     picks = torch.tensor([0, 5, 13, 30, 11])
     batch = data[picks]
     with torch.no_grad():
-        *graph, action_edges = collate_states(batch, table)
+        *graph, action_edges = collate_states(batch, table, time_horizon, SMALL_ENV["max_steps"])
         logits = action_logits(model, tuple(graph), action_edges)
     env = marl_cover.parallel_env(**SMALL_ENV, num_robots=3, task=task)
+    if time_horizon is not None:  # every node's fifth feature is the state's clock
+        nodes = graph[0].view(len(picks), -1, 5)
+        steps_left = SMALL_ENV["max_steps"] - batch["step"]
+        assert torch.equal(
+            nodes[..., 4], (steps_left / time_horizon).view(-1, 1).expand_as(nodes[..., 4])
+        )
     shape = env._ego_shape
     offsets = np.cumsum([0] + [e.num_steps for e in episodes])
     for row, index in enumerate(picks.tolist()):
@@ -75,7 +84,9 @@ def test_collated_batches_are_the_environment_states(task: str) -> None:
         for t in range(step):  # replay to the stored state
             env.step(dict(zip(env.possible_agents, episode.actions[t].tolist(), strict=True)))
         assert np.array_equal(env.snapshot().robot_node, episode.robot_node[step])
-        rebuilt = episode.observations(step, 3, shape, sensor_range=sensor)
+        rebuilt = episode.observations(
+            step, 3, shape, sensor_range=sensor, max_steps=SMALL_ENV["max_steps"]
+        )
         for key, value in env.observe_batch().items():
             np.testing.assert_array_equal(rebuilt[key], value, err_msg=key)
         state = {k: torch.as_tensor(v) for k, v in env.state().items()}
@@ -110,12 +121,29 @@ def test_the_torchrl_actor_never_samples_a_masked_action() -> None:
         *(observation[key] for key in ("nodes", "edge_index", "edge_attr", "edge_mask")), masks
     )
     assert logits.shape == mask.shape == (12, 4, 5) and torch.equal(mask, masks)
+    # a model with a clock reads each robot's steps_left from its observation
+    timed = make_actor(
+        AggregationGNN(GNNConfig(hops=3, time_horizon=12)),
+        observation_key=("robot", "observation"),
+        action_key=("robot", "action"),
+        mask_key=("robot", "action_mask"),
+    )
+    assert ("robot", "observation", "steps_left") in timed.in_keys
+    assert torch.equal(observation["steps_left"][:, 0].view(-1), 12 - torch.arange(12))
+    timed_rollout = env.rollout(12, policy=timed)
+    chosen = timed_rollout["robot", "action"].unsqueeze(-1)
+    assert timed_rollout["robot", "action_mask"].gather(-1, chosen).all()
 
 
-@pytest.mark.parametrize("kind", ["linear", "nonlinear"])
-def test_decentralized_and_centralized_policies_act_alike(kind: str) -> None:
+@pytest.mark.parametrize(
+    ("kind", "time_horizon"), [("linear", None), ("nonlinear", None), ("nonlinear", 12)]
+)
+def test_decentralized_and_centralized_policies_act_alike(
+    kind: str, time_horizon: int | None
+) -> None:
     torch.manual_seed(1)
-    model = AggregationGNN(GNNConfig(kind=kind, hops=3)).double()  # no float32 near-ties
+    config = GNNConfig(kind=kind, hops=3, time_horizon=time_horizon)
+    model = AggregationGNN(config).double()  # no float32 near-ties
     local, central = GNNPolicy(model), GNNPolicy(model, centralized=True)
     env = marl_cover.parallel_env(**SMALL_ENV, num_robots=5)
     observations, _ = env.reset(seed=3)

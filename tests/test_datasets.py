@@ -87,7 +87,8 @@ def test_recorded_episode_replays_exactly(tmp_path) -> None:
     )
     total = 0.0
     for t in range(loaded.num_steps):
-        rebuilt = loaded.observations(t, 6, replay._ego_shape)
+        rebuilt = loaded.observations(t, 6, replay._ego_shape, max_steps=15)
+        assert set(rebuilt) == set(obs[replay.possible_agents[0]])
         for i, agent in enumerate(replay.possible_agents):
             for key, value in rebuilt.items():
                 assert np.array_equal(value[i], obs[agent][key]), (t, agent, key)

@@ -166,7 +166,8 @@ def test_undiscovered_waypoints_never_appear(seed: int, num_robots: int, hops: i
             "numpy",
             known_neighbors(graph, discovered),
         )
-        for key in batch:
+        assert set(batch) == {*numpy, "steps_left"}
+        for key in numpy:
             np.testing.assert_array_equal(batch[key], numpy[key], err_msg=key)
         for i, agent in enumerate(env.possible_agents):
             obs = observations[agent]

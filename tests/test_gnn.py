@@ -57,6 +57,33 @@ def test_ego_graphs_give_the_logits_of_one_pass_over_the_state(kind: str, hops: 
 
 
 @pytest.mark.parametrize("kind", ["linear", "nonlinear"])
+def test_a_model_with_a_clock_reads_steps_left_in_both_modes(kind: str) -> None:
+    torch.manual_seed(7)
+    model = AggregationGNN(GNNConfig(kind=kind, hops=3, time_horizon=50)).double()
+    assert model.node_encoder[0].in_features == 5
+    for env in random_states(3, seed=7):
+        batch = {
+            k: v.double() if v.is_floating_point() else v
+            for k, v in tensors(env.observe_batch()).items()
+        }
+        state = {
+            k: v.double() if v.is_floating_point() else v for k, v in tensors(env.state()).items()
+        }
+        assert torch.equal(batch["steps_left"], state["steps_left"].expand(6))
+        mask = torch.as_tensor(env.state()["action_mask"]).bool()
+        with torch.no_grad():
+            local = decentralized_logits(model, batch)
+            central = centralized_logits(model, state)
+            later = centralized_logits(model, {**state, "steps_left": state["steps_left"] - 5})
+        torch.testing.assert_close(local[mask], central[mask], atol=1e-5, rtol=0)
+        assert not torch.allclose(later[mask], central[mask])
+        with pytest.raises(KeyError, match="steps_left"):
+            decentralized_logits(model, {k: v for k, v in batch.items() if k != "steps_left"})
+    with pytest.raises(ValueError, match="time_horizon"):
+        GNNConfig(time_horizon=0)
+
+
+@pytest.mark.parametrize("kind", ["linear", "nonlinear"])
 def test_padded_batches_of_partial_ego_graphs_equal_one_at_a_time(kind: str) -> None:
     """Exploration: a batch of ego-graphs of the known graph (different sizes, padded) gives
     each robot the logits it gets alone and in one pass over the discovered ``state()``; no

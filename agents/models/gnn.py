@@ -51,6 +51,10 @@ class GNNConfig:
             the paper).
         per_hop: Non-linear model only: a block of its own for each hop instead of one block
             applied ``hops`` times (off in the paper; ``hops`` times the block parameters).
+        time_horizon: Give the network the clock: every node gets one more feature,
+            ``steps_left / time_horizon`` (the actions left in the episode, which an open-loop
+            expert plans for), appended by :func:`with_time_feature` from the ``steps_left`` of
+            the observation or state. ``None`` (the paper): no time feature.
     """
 
     kind: str = "nonlinear"
@@ -61,6 +65,12 @@ class GNNConfig:
     edge_features: int = 1
     residual: bool = False
     per_hop: bool = False
+    time_horizon: int | None = None
+
+    @property
+    def input_features(self) -> int:
+        """Node features the encoder reads (one more with ``time_horizon``)."""
+        return self.node_features + (self.time_horizon is not None)
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
@@ -71,6 +81,8 @@ class GNNConfig:
             raise ValueError("residual applies to the non-linear model only")
         if self.per_hop and self.kind == "linear":
             raise ValueError("per_hop applies to the non-linear model only")
+        if self.time_horizon is not None and self.time_horizon < 1:
+            raise ValueError(f"time_horizon must be >= 1 or None, got {self.time_horizon}")
 
 
 def mlp(inputs: int, hidden: int, layers: int) -> nn.Sequential:
@@ -88,6 +100,31 @@ def _tail(layers: nn.Sequential, x: torch.Tensor) -> torch.Tensor:
     for module in list(layers)[1:]:
         x = torch.relu_(x) if isinstance(module, nn.ReLU) else module(x)
     return x
+
+
+def with_time_feature(nodes: torch.Tensor, steps_left: torch.Tensor, horizon: int) -> torch.Tensor:
+    """``nodes (*B, ..., M, F)`` with ``steps_left (*B,) / horizon`` appended to every node,
+    ``(*B, ..., M, F + 1)``."""
+    fraction = steps_left.to(nodes.dtype) / horizon
+    fraction = fraction.reshape(*fraction.shape, *([1] * (nodes.dim() - fraction.dim())))
+    return torch.cat([nodes, fraction.expand(*nodes.shape[:-1], 1)], dim=-1)
+
+
+def timed_nodes(model: AggregationGNN, batch: dict[str, torch.Tensor]) -> torch.Tensor:
+    """``batch["nodes"]`` with the time feature when ``model`` reads one.
+
+    Raises:
+        KeyError: the model reads the time but ``batch`` has no ``steps_left``.
+    """
+    horizon = model.config.time_horizon
+    if horizon is None:
+        return batch["nodes"]
+    if "steps_left" not in batch:
+        raise KeyError(
+            f"this model reads the time (time_horizon={horizon}) but the input has no "
+            "'steps_left' (the actions left in the episode)"
+        )
+    return with_time_feature(batch["nodes"], batch["steps_left"], horizon)
 
 
 def mean_aggregate(
@@ -115,7 +152,7 @@ class AggregationGNN(nn.Module):
         super().__init__()
         self.config = config = config or GNNConfig()
         h, layers = config.hidden, config.mlp_layers
-        self.node_encoder = mlp(config.node_features, h, layers)
+        self.node_encoder = mlp(config.input_features, h, layers)
         self.edge_encoder = mlp(config.edge_features, h, layers)
         self.edge_decoder = mlp(h, h, layers)
         if config.kind == "nonlinear" and config.per_hop:
@@ -304,7 +341,9 @@ def action_logits(
 
 
 def decentralized_logits(model: AggregationGNN, batch: dict[str, torch.Tensor]) -> torch.Tensor:
-    """Action logits ``(B, 5)`` of each ego robot from its padded ego-graph (node 0)."""
+    """Action logits ``(B, 5)`` of each ego robot from its padded ego-graph (node 0) (and its
+    ``steps_left (B,)`` when the model reads the time)."""
+    batch = {**batch, "nodes": timed_nodes(model, batch)}
     nodes, edge_index, edge_attr, action_edges = flatten_padded(batch)
     return action_logits(model, (nodes, edge_index, edge_attr), action_edges)
 
@@ -319,7 +358,9 @@ def batched_state_logits(
     model: AggregationGNN, batch: dict[str, torch.Tensor], num_robots: int
 ) -> torch.Tensor:
     """Action logits ``(B, R, 5)`` of every robot of a batch of padded states ``(B, M, ...)``,
-    one pass over all of them (``-inf`` where an action has no edge)."""
+    one pass over all of them (``-inf`` where an action has no edge; ``steps_left (B,)`` when
+    the model reads the time)."""
+    batch = {**batch, "nodes": timed_nodes(model, batch)}
     nodes, edge_index, edge_attr, heads = flatten_padded(batch, NUM_ACTIONS * num_robots)
     logits = action_logits(model, (nodes, edge_index, edge_attr), heads.view(-1, NUM_ACTIONS))
     return logits.view(heads.shape[0], num_robots, NUM_ACTIONS)

@@ -62,9 +62,12 @@ class StateLogits(nn.Module):
         edge_mask: torch.Tensor,
         node_mask: torch.Tensor | None,
         action_mask: torch.Tensor,
+        steps_left: torch.Tensor | None = None,
     ) -> tuple[torch.Tensor, torch.Tensor]:
         lead, r = nodes.shape[:-2], self.num_robots
         batch = flat_batch(nodes, edge_index, edge_attr, edge_mask, node_mask)
+        if steps_left is not None:  # (*lead,): read when the network has a time_horizon
+            batch["steps_left"] = steps_left.reshape(-1)
         logits = batched_state_logits(self.gnn, batch, r)  # (B, R, 5), -inf without an edge
         mask = action_mask.reshape(-1, r, NUM_ACTIONS).bool() & torch.isfinite(logits)
         logits = logits.masked_fill(~mask, 0.0)
@@ -85,9 +88,10 @@ class EgoGraphLogits(StateLogits):
         edge_attr: torch.Tensor,
         edge_mask: torch.Tensor,
         action_mask: torch.Tensor,
+        steps_left: torch.Tensor | None = None,
     ) -> tuple[torch.Tensor, torch.Tensor]:
         logits, mask = super().forward(
-            nodes, edge_index, edge_attr, edge_mask, None, action_mask.unsqueeze(-2)
+            nodes, edge_index, edge_attr, edge_mask, None, action_mask.unsqueeze(-2), steps_left
         )
         return logits.squeeze(-2), mask.squeeze(-2)
 
@@ -146,10 +150,14 @@ def make_actor(
         mask_key: Where the action mask is read (default: ``action_mask`` inside the
             observation; TorchRL's ``PettingZooWrapper`` lifts it to ``(group, "action_mask")``).
         temperature: Divides the logits of the sampling policy (see :class:`Tempered`).
+
+    A network with a ``time_horizon`` also reads ``steps_left`` inside the observation.
     """
     prefix = observation_key if isinstance(observation_key, tuple) else (observation_key,)
     in_keys = [(*prefix, key) for key in GRAPH_KEYS[:-1]]
     in_keys.append(mask_key if mask_key is not None else (*prefix, "action_mask"))
+    if gnn.config.time_horizon is not None:
+        in_keys.append((*prefix, "steps_left"))
     return _masked_actor(EgoGraphLogits(gnn), in_keys, action_key, temperature)
 
 
@@ -163,11 +171,15 @@ def make_state_actor(
 ) -> Any:
     """A ``ProbabilisticActor`` of every robot at once over :class:`StateLogits` (the keys of
     :class:`agents.batched_env.BatchedCoverageEnv` by default; ``temperature`` as in
-    :func:`make_actor`)."""
+    :func:`make_actor`; a network with a ``time_horizon`` also reads the state's
+    ``steps_left``)."""
     prefix = state_key if isinstance(state_key, tuple) else (state_key,)
     in_keys = [(*prefix, key) for key in (*GRAPH_KEYS[:-1], "node_mask")]
+    in_keys.append(mask_key)
+    if gnn.config.time_horizon is not None:
+        in_keys.append((*prefix, "steps_left"))
     module = StateLogits(gnn, num_robots)
-    return _masked_actor(module, [*in_keys, mask_key], action_key, temperature)
+    return _masked_actor(module, in_keys, action_key, temperature)
 
 
 def _masked_actor(
@@ -240,9 +252,12 @@ class GNNPolicy:
     def logits(self, observations: dict[str, dict[str, np.ndarray]]) -> torch.Tensor:
         """Action logits ``(R, 5)`` (``-inf`` for masked actions) from per-agent ego-graphs."""
         agents = list(observations)
+        keys = GRAPH_KEYS[:-1]
+        if self.model.config.time_horizon is not None:
+            keys = (*keys, "steps_left")
         batch = {
-            key: self._tensor(np.stack([observations[a][key] for a in agents]))
-            for key in GRAPH_KEYS[:-1]
+            key: self._tensor(np.stack([_entry(observations, a, key) for a in agents]))
+            for key in keys
         }
         return decentralized_logits(self.model, batch)
 
@@ -260,6 +275,14 @@ class GNNPolicy:
         """Every robot's action ``(R,)`` from one pass over ``state()`` (centralized)."""
         tensors = {key: self._tensor(value) for key, value in state.items()}
         return self._choose(centralized_logits(self.model, tensors))
+
+
+def _entry(observations: dict[str, dict[str, np.ndarray]], agent: str, key: str) -> np.ndarray:
+    """``observations[agent][key]``, or a ``KeyError`` that names both."""
+    try:
+        return observations[agent][key]
+    except KeyError:
+        raise KeyError(f"observation of agent {agent!r} has no {key!r}") from None
 
 
 def save_model(

@@ -20,7 +20,7 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from agents.models.gnn import AggregationGNN, flatten_padded
+from agents.models.gnn import AggregationGNN, flatten_padded, with_time_feature
 from agents.models.policy import flat_batch
 from marl_cover.ego import NUM_ACTIONS
 
@@ -78,14 +78,6 @@ class StateValue(nn.Module):
         if self.aggregate == "sum":
             values = values.sum(dim=1, keepdim=True).expand(-1, r, 1)
         return values.reshape(*lead, r, 1)
-
-
-def with_time_feature(nodes: torch.Tensor, steps_left: torch.Tensor, horizon: int) -> torch.Tensor:
-    """``nodes (*B, ..., M, F)`` with ``steps_left (*B,) / horizon`` appended to every node,
-    ``(*B, ..., M, F + 1)``."""
-    fraction = steps_left.to(nodes.dtype) / horizon
-    fraction = fraction.reshape(*fraction.shape, *([1] * (nodes.dim() - fraction.dim())))
-    return torch.cat([nodes, fraction.expand(*nodes.shape[:-1], 1)], dim=-1)
 
 
 class EgoValue(StateValue):

@@ -147,10 +147,17 @@ def make_buffer(capacity: int, batch_size: int) -> Any:
 
 
 def batch_loss(
-    model: AggregationGNN, batch: Any, table: GraphTable, entropy_coef: float = 0.0
+    model: AggregationGNN,
+    batch: Any,
+    table: GraphTable,
+    entropy_coef: float = 0.0,
+    max_steps: int | None = None,
 ) -> tuple[torch.Tensor, dict[str, float]]:
-    """Mean cross-entropy of the expert's actions over every robot of a batch of transitions."""
-    nodes, edge_index, edge_attr, action_edges = collate_states(batch, table)
+    """Mean cross-entropy of the expert's actions over every robot of a batch of transitions
+    (``max_steps``: actions per episode, for a model that reads the time)."""
+    nodes, edge_index, edge_attr, action_edges = collate_states(
+        batch, table, model.config.time_horizon, max_steps
+    )
     logits = action_logits(model, (nodes, edge_index, edge_attr), action_edges)  # (B*R, 5)
     target = batch["action"].reshape(-1)
     cross_entropy = functional.cross_entropy(logits, target)
@@ -167,13 +174,19 @@ def batch_loss(
 
 
 @torch.no_grad()
-def validate(model: AggregationGNN, data: Any, table: GraphTable, chunk: int = 512) -> dict:
+def validate(
+    model: AggregationGNN,
+    data: Any,
+    table: GraphTable,
+    chunk: int = 512,
+    max_steps: int | None = None,
+) -> dict:
     """Cross-entropy and accuracy over all validation transitions."""
     model.eval()
     totals = {"cross_entropy": 0.0, "accuracy": 0.0}
     for start in range(0, len(data), chunk):
         batch = data[start : start + chunk]
-        _, metrics = batch_loss(model, batch, table)
+        _, metrics = batch_loss(model, batch, table, max_steps=max_steps)
         for key in totals:
             totals[key] += metrics[key] * len(batch)
     model.train()
@@ -333,7 +346,9 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
                 log.log_scalar("dagger_rollout_reward", reward, step=step)
         for group in optimizer.param_groups:
             group["lr"] = config.lr * config.lr_decay ** (phase_step / config.lr_decay_every)
-        loss, metrics = batch_loss(model, buffer.sample(), table, config.entropy_coef)
+        loss, metrics = batch_loss(
+            model, buffer.sample(), table, config.entropy_coef, env.config.max_steps
+        )
         optimizer.zero_grad()
         loss.backward()
         optimizer.step()
@@ -346,7 +361,7 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
                 log.log_scalar(f"train_{key}", value, step=step)
             log.log_scalar("lr", optimizer.param_groups[0]["lr"], step=step)
         if step % config.val_every == 0 or step == config.total_steps:
-            scores = validate(model, val_data, table)
+            scores = validate(model, val_data, table, max_steps=env.config.max_steps)
             scores["select_reward"] = selection_reward(model, env, config)
             if scores["select_reward"] > best_reward:
                 best_reward = scores["select_reward"]

@@ -1,7 +1,8 @@
 """Expert transitions in TorchRL storage, and their collation into one flat graph per batch.
 
 A transition is stored compactly (TensorDict fields, batch dim = transitions):
-``episode`` (index into a per-episode graph table), ``robot_node (R,)``, ``interest (N_max,)``
+``episode`` (index into a per-episode graph table), ``step`` (actions taken before it),
+``robot_node (R,)``, ``interest (N_max,)``
 bool (unvisited points of interest before the action), ``action (R,)`` (the expert's label),
 and in exploration ``discovered (N_max,)`` and ``frontier (N_max,)`` bool.
 The graph of each episode is stored once (``neighbors (N_max, 4)``, ``distances (N_max, 4)``).
@@ -21,6 +22,7 @@ import torch
 from tensordict import TensorDict
 
 from agents.datasets import Episode
+from agents.models.gnn import with_time_feature
 from marl_cover.discovery import frontier_of
 from marl_cover.ego import NUM_ACTIONS, NUM_NODE_FEATURES
 from marl_cover.graph import SpatialGraph
@@ -74,7 +76,7 @@ def episode_transitions(
     With ``sensor_range`` (exploration) each transition also holds what the team had
     discovered and the frontier.
     """
-    names = ["episode", "robot_node", "interest"]
+    names = ["episode", "step", "robot_node", "interest"]
     if sensor_range is not None:
         names += ["discovered", "frontier"]
     fields: dict[str, list[np.ndarray]] = {name: [] for name in names}
@@ -96,6 +98,7 @@ def episode_transitions(
             fields["discovered"].append(discovered)
             fields["frontier"].append(frontier)
         fields["episode"].append(np.full(steps, first_index + i, dtype=np.int64))
+        fields["step"].append(np.arange(steps, dtype=np.int64))
         fields["robot_node"].append(episode.robot_node[:steps].astype(np.int64))
         fields["interest"].append(interest)
         actions.append(episode.actions.astype(np.int64))
@@ -105,7 +108,10 @@ def episode_transitions(
 
 
 def collate_states(
-    batch: TensorDict, table: GraphTable
+    batch: TensorDict,
+    table: GraphTable,
+    time_horizon: int | None = None,
+    max_steps: int | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """One flat graph holding the state of every sampled transition.
 
@@ -115,10 +121,14 @@ def collate_states(
             waypoints then have no features and no edges (isolated nodes change no robot's
             logits, so this equals the env's ``state()`` of discovered waypoints only).
         table: The graphs the ``episode`` indices refer to.
+        time_horizon: A model's ``GNNConfig.time_horizon``: every node gets ``steps_left /
+            time_horizon`` as a fifth feature, ``steps_left = max_steps - step``.
+        max_steps: Actions per episode (default: ``time_horizon``).
 
     Returns:
-        ``nodes (V, 4)``, ``edge_index (2, E)``, ``edge_attr (E, 1)``, and the flat edge id of
-        each robot's action slots ``(B * R, 5)`` (``-1`` where the slot has no waypoint).
+        ``nodes (V, 4)`` (``(V, 5)`` with ``time_horizon``), ``edge_index (2, E)``,
+        ``edge_attr (E, 1)``, and the flat edge id of each robot's action slots ``(B * R, 5)``
+        (``-1`` where the slot has no waypoint).
     """
     episode, robot_node = batch["episode"], batch["robot_node"]
     num_samples, num_robots = robot_node.shape
@@ -136,6 +146,9 @@ def collate_states(
     nodes[:, num_robots:, 2] = (batch["interest"] & exists).float()
     if known:
         nodes[:, num_robots:, 3] = batch["frontier"].float()
+    if time_horizon is not None:
+        steps_left = (max_steps or time_horizon) - batch["step"]
+        nodes = with_time_feature(nodes, steps_left, time_horizon)
 
     neighbors = table.neighbors[episode]  # (B, N, 4)
     distances = table.distances[episode]  # (B, N, 4)
@@ -171,7 +184,7 @@ def collate_states(
     new_id = torch.cumsum(action_valid.long(), 0) - 1
     action_edges = torch.where(action_valid, new_id, torch.full_like(new_id, -1))
     return (
-        nodes.view(-1, NUM_NODE_FEATURES),
+        nodes.view(-1, nodes.shape[-1]),
         edge_index,
         edge_attr,
         action_edges.view(-1, NUM_ACTIONS),
