@@ -10,6 +10,7 @@ robot's recorded action with a relabelling of that state.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -17,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from agents.datasets import Episode
-from marl_cover.env import CoverageEnv
+from marl_cover.env import CoverageEnv, CoverageSnapshot
 
 
 @dataclass(frozen=True)
@@ -92,3 +93,11 @@ def label_agreement(
         if progress is not None:
             progress(done)
     return Agreement(agreed, total, dict(sorted(by_step.items())))
+
+
+def with_steps_left(snapshot: CoverageSnapshot, steps_left: int) -> CoverageSnapshot:
+    """``snapshot`` with its clock set to ``steps_left`` actions left (a planner given it is
+    blind to the real time: what a policy without a clock would have to assume)."""
+    if steps_left < 1:
+        raise ValueError(f"steps_left must be >= 1, got {steps_left}")
+    return dataclasses.replace(snapshot, num_steps=snapshot.max_steps - steps_left)

@@ -3,6 +3,7 @@
     python scripts/label_agreement.py                      # BC's validation episodes, 5 states each
     python scripts/label_agreement.py --episodes 40 --states 5 --out outputs/label_agreement.json
     python scripts/label_agreement.py --relabel gnn --out outputs/label_agreement_gnn.json
+    python scripts/label_agreement.py --plan-steps-left 50 --out outputs/label_agreement_blind.json
 
 The states are those of behaviour cloning's validation split (``configs/bc_coverage.yaml``
 unless ``--config``), the labels those recorded in the dataset; each sampled state is relabelled
@@ -10,7 +11,9 @@ by a new routing expert with the dataset's settings (``meta.json``: backend, ite
 limit) and another solver seed, planning from that state. The agreement bounds how well any
 policy of the state can match the labels. ``--relabel gnn`` asks a model instead (argmax of one
 pass over ``state()``; ``--checkpoint``, by default the shipped behaviour-cloned model): the
-same states, so the two tables compare line by line. Prints a table by step and writes JSON
+same states, so the two tables compare line by line. ``--plan-steps-left N`` makes the expert
+blind to the clock (it plans as if ``N`` actions were left at every state): how much of the
+labels a policy without the time could explain. Prints a table by step and writes JSON
 atomically.
 """
 
@@ -28,15 +31,16 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from agents.cli import non_negative_int, positive_int, write_text_atomic  # noqa: E402
 from agents.configuration import load_or_exit  # noqa: E402
-from agents.label_agreement import label_agreement  # noqa: E402
+from agents.label_agreement import label_agreement, with_steps_left  # noqa: E402
 from agents.training.bc import BCConfig, split_episodes  # noqa: E402
 from marl_cover import parallel_env  # noqa: E402
 
 BC_MODEL = "agents/models/shipped/bc/coverage_gnn.pt"
 
 
-def expert_relabel(options: dict, solver_seed: int):  # noqa: ANN201
-    """A new routing expert with the dataset's settings plans from each state."""
+def expert_relabel(options: dict, solver_seed: int, plan_steps_left: int | None = None):  # noqa: ANN201
+    """A new routing expert with the dataset's settings plans from each state (as if
+    ``plan_steps_left`` actions were left, when given)."""
     from agents.experts import RoutingExpert
 
     def relabel(env, step: int) -> np.ndarray:  # noqa: ANN001
@@ -46,7 +50,10 @@ def expert_relabel(options: dict, solver_seed: int):  # noqa: ANN201
             max_iterations=options.get("iterations") or None,
             seed=solver_seed + step,
         )
-        return expert.act_snapshot(env.snapshot())
+        snapshot = env.snapshot()
+        if plan_steps_left is not None:
+            snapshot = with_steps_left(snapshot, plan_steps_left)
+        return expert.act_snapshot(snapshot)
 
     return relabel
 
@@ -74,6 +81,12 @@ def main() -> None:
     parser.add_argument("--seed", type=non_negative_int, default=0, help="chooses the states")
     parser.add_argument("--solver-seed", type=non_negative_int, default=12345)
     parser.add_argument("--relabel", choices=("expert", "gnn"), default="expert")
+    parser.add_argument(
+        "--plan-steps-left",
+        type=positive_int,
+        default=None,
+        help="expert: plan as if this many actions were left (blind to the clock)",
+    )
     parser.add_argument("--checkpoint", type=Path, default=Path(BC_MODEL), help="--relabel gnn")
     parser.add_argument("--out", type=Path, default=Path("outputs/label_agreement.json"))
     args = parser.parse_args()
@@ -89,7 +102,7 @@ def main() -> None:
     episodes = validation[: args.episodes]
     env = parallel_env(**meta.get("env", {}))
 
-    relabel = expert_relabel(options, args.solver_seed)
+    relabel = expert_relabel(options, args.solver_seed, args.plan_steps_left)
     if args.relabel == "gnn":
         relabel = gnn_relabel(args.checkpoint)
 
@@ -116,6 +129,7 @@ def main() -> None:
         "seed": args.seed,
         "relabel": args.relabel,
         "solver_seed": args.solver_seed if args.relabel == "expert" else None,
+        "plan_steps_left": args.plan_steps_left if args.relabel == "expert" else None,
         "checkpoint": str(args.checkpoint) if args.relabel == "gnn" else None,
         "expert": {k: options.get(k) for k in ("backend", "time_limit", "iterations")},
         "agreement": result.fraction,

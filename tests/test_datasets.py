@@ -152,6 +152,22 @@ def test_label_agreement_replays_recorded_states() -> None:
         label_agreement(other_env, episodes, greedy.relabel, 4, np.random.default_rng(0))
 
 
+def test_a_clock_blind_snapshot_plans_for_the_steps_it_is_told() -> None:
+    from agents.experts.problem import build_problem
+    from agents.label_agreement import with_steps_left
+
+    env = marl_cover.parallel_env(city_size=100, num_robots=3, hops=6, max_steps=12)
+    env.reset(seed=4)
+    env.step({a: 0 for a in env.agents})
+    snapshot = env.snapshot()
+    assert build_problem(snapshot).budget.tolist() == [11, 11, 11]
+    blind = with_steps_left(snapshot, 30)
+    assert build_problem(blind).budget.tolist() == [30, 30, 30]
+    assert np.array_equal(blind.robot_node, snapshot.robot_node)
+    with pytest.raises(ValueError, match="steps_left"):
+        with_steps_left(snapshot, 0)
+
+
 def test_label_agreement_script(tmp_path) -> None:
     """Relabels the validation states of a small dataset with the dataset's expert settings."""
     data = tmp_path / "data"
