@@ -298,7 +298,49 @@ def test_dagger_labels_the_states_the_learner_visits(tmp_path) -> None:
         assert (labels >= 0).all()  # every label is a legal move
 
 
-def test_train_bc_script_runs_from_the_preset_with_overrides(tmp_path) -> None:
+def test_dagger_fraction_fixes_the_share_of_learner_states_in_a_batch(
+    tmp_path, monkeypatch
+) -> None:
+    from tensordict import TensorDict
+
+    from agents.training.bc import make_buffer, mixed_batch
+
+    dataset, own = make_buffer(100), make_buffer(100)
+    dataset.extend(TensorDict({"x": torch.arange(40)}, batch_size=[40]))
+    assert mixed_batch(dataset, own, 8, 3)["x"].shape == (8,)  # own is still empty
+    own.extend(TensorDict({"x": 1000 + torch.arange(10)}, batch_size=[10]))
+    for _ in range(5):
+        x = mixed_batch(dataset, own, 8, 3)["x"]
+        assert (x[:5] < 40).all() and (x[5:] >= 1000).all()
+    with pytest.raises(ValueError, match="dagger.fraction"):
+        DaggerConfig(fraction=1.0)
+    # a run with a DAgger share resumes as if never interrupted
+    pytest.importorskip("pyvrp")
+    small_dataset(tmp_path / "data")
+    dagger = DaggerConfig(rounds=1, episodes=2, beta=0.0, steps=20, iterations=30, fraction=0.5)
+    whole = train_bc(small_config(tmp_path, "whole", steps=20, val_every=10, dagger=dagger))
+    assert whole["step"] == 40
+    import agents.training.bc as bc
+
+    calls, real = [], bc.batch_loss
+
+    def interrupted(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
+        calls.append(1)
+        if len(calls) == 36:  # validations count too: step 34, after the checkpoint of step 30
+            raise KeyboardInterrupt
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(bc, "batch_loss", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        train_bc(small_config(tmp_path, "parts", steps=20, val_every=10, dagger=dagger))
+    monkeypatch.setattr(bc, "batch_loss", real)
+    resumed = train_bc(small_config(tmp_path, "parts", steps=20, val_every=10, dagger=dagger))
+    assert resumed["step"] == 40
+    one, _ = load_model(tmp_path / "whole" / "model.pt")
+    two, _ = load_model(tmp_path / "parts" / "model.pt")
+    for a, b in zip(one.state_dict().values(), two.state_dict().values(), strict=True):
+        assert torch.equal(a, b)
+
     import json
     import subprocess
     import sys

@@ -62,6 +62,9 @@ class DaggerConfig:
         steps: Training steps after each round.
         iterations: Expert solver iterations per label (PyVRP; deterministic labels).
         seed: First roll-out episode seed (rounds use consecutive blocks).
+        fraction: Share of every batch drawn from the DAgger states once there are any (the
+            rest from the expert dataset). ``None``: the DAgger states join the dataset and
+            are drawn as often as any transition (a few percent of a batch).
     """
 
     rounds: int = 0
@@ -71,6 +74,11 @@ class DaggerConfig:
     steps: int = 3000
     iterations: int = 500
     seed: int = 1_000_000
+    fraction: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.fraction is not None and not 0.0 < self.fraction < 1.0:
+            raise ValueError(f"dagger.fraction must be in (0, 1) or null, got {self.fraction}")
 
 
 @dataclass
@@ -134,7 +142,7 @@ def split_episodes(config: BCConfig) -> tuple[list[Episode], list[Episode]]:
     return train, val
 
 
-def make_buffer(capacity: int, batch_size: int) -> Any:
+def make_buffer(capacity: int, batch_size: int | None = None) -> Any:
     """A TorchRL replay buffer sampling stored transitions without replacement (epochs)."""
     from torchrl.data import LazyTensorStorage, ReplayBuffer
     from torchrl.data.replay_buffers import SamplerWithoutReplacement
@@ -144,6 +152,14 @@ def make_buffer(capacity: int, batch_size: int) -> Any:
         sampler=SamplerWithoutReplacement(),
         batch_size=batch_size,
     )
+
+
+def mixed_batch(dataset: Any, own: Any | None, batch_size: int, own_size: int) -> Any:
+    """``batch_size`` transitions: ``own_size`` from the DAgger buffer ``own`` (last) and the
+    rest from ``dataset``; all from ``dataset`` while ``own`` is absent or empty."""
+    if own is None or len(own) == 0:
+        return dataset.sample(batch_size)
+    return torch.cat([dataset.sample(batch_size - own_size), own.sample(own_size)])
 
 
 def batch_loss(
@@ -285,19 +301,24 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
     # exploration: transitions carry what the team had discovered (same sensor as the env)
     sensor = env.config.sensor_range if env.config.task == "exploration" else None
     val_data = episode_transitions(val, max_nodes, first_index=len(train), sensor_range=sensor)
-    capacity = sum(e.num_steps for e in train) + config.dagger.rounds * config.dagger.episodes * (
-        env.config.max_steps
-    )
-    buffer = make_buffer(capacity, config.batch_size)
+    dagger_capacity = config.dagger.rounds * config.dagger.episodes * env.config.max_steps
+    # with dagger.fraction the DAgger states have a buffer of their own, drawn from at that rate
+    fraction = config.dagger.fraction
+    own_size = 0 if fraction is None else max(1, round(fraction * config.batch_size))
+    own = make_buffer(max(dagger_capacity, 1)) if fraction is not None else None
+    buffer = make_buffer(sum(e.num_steps for e in train) + (dagger_capacity if own is None else 0))
     buffer.extend(episode_transitions(train, max_nodes, sensor_range=sensor))
 
     def add_dagger(episodes: list[Episode]) -> None:
         nonlocal table
         first = len(table)
         table = table.extended([e.graph for e in episodes])
-        buffer.extend(
+        (buffer if own is None else own).extend(
             episode_transitions(episodes, max_nodes, first_index=first, sensor_range=sensor)
         )
+
+    def next_batch() -> Any:
+        return mixed_batch(buffer, own, config.batch_size, own_size)
 
     for episodes in dagger_episodes:
         add_dagger(episodes)
@@ -316,6 +337,8 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
         model.load_state_dict(state["state_dict"])
         optimizer.load_state_dict(state["optimizer"])
         buffer.sampler.load_state_dict(state["sampler"])
+        if own is not None:
+            own.sampler.load_state_dict(state["dagger_sampler"])
         torch.set_rng_state(state["torch_rng"])
         step, best_reward = state["step"], state["best_reward"]
         logger.info("resumed %s at step %d", out, step)
@@ -347,7 +370,7 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
         for group in optimizer.param_groups:
             group["lr"] = config.lr * config.lr_decay ** (phase_step / config.lr_decay_every)
         loss, metrics = batch_loss(
-            model, buffer.sample(), table, config.entropy_coef, env.config.max_steps
+            model, next_batch(), table, config.entropy_coef, env.config.max_steps
         )
         optimizer.zero_grad()
         loss.backward()
@@ -381,6 +404,7 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
                 {**metadata, "step": step},
                 optimizer=optimizer.state_dict(),
                 sampler=buffer.sampler.state_dict(),
+                dagger_sampler=None if own is None else own.sampler.state_dict(),
                 torch_rng=torch.get_rng_state(),
                 step=step,
                 best_reward=best_reward,
