@@ -19,7 +19,9 @@ episode is used instead of the first 200):
    play the current policy (executing the expert's action with probability ``beta``,
    decaying per round), label every visited state with the expert
    re-planned from that state, add the labelled states to the buffer (and to disk, as dataset
-   shards), and train ``dagger.steps`` more steps with a fresh learning-rate schedule.
+   shards), and train ``dagger.steps`` more steps with a fresh learning-rate schedule. With
+   ``dagger.fraction`` the labelled states have a buffer of their own and fill that share of
+   every batch (otherwise they are a few percent of the transitions).
 
 Resuming: ``checkpoint.pt`` holds the model, the optimiser, the sampler, the RNG states and the
 phase; DAgger rounds already labelled are read back from ``out/dagger``.
