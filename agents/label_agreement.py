@@ -66,7 +66,6 @@ def label_agreement(
         ValueError: a replayed episode leaves its recorded positions (another map, other
             settings), naming its seed and step.
     """
-    agreed = total = 0
     by_step: dict[int, list[int]] = {}
     for done, episode in enumerate(episodes, start=1):
         count = min(states_per_episode, episode.num_steps)
@@ -85,13 +84,13 @@ def label_agreement(
                     "is the environment configured as when it was recorded?"
                 )
             same = np.asarray(relabel(env, step)) == episode.actions[step]
-            agreed += int(same.sum())
-            total += len(same)
             counts = by_step.setdefault(bucket * (step // bucket), [0, 0])
             counts[0] += int(same.sum())
             counts[1] += len(same)
         if progress is not None:
             progress(done)
+    agreed = sum(counts[0] for counts in by_step.values())
+    total = sum(counts[1] for counts in by_step.values())
     return Agreement(agreed, total, dict(sorted(by_step.items())))
 
 

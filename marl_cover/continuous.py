@@ -206,8 +206,8 @@ class QuadrotorCoverageEnv(CoverageEnv):
         self._tick = 0  # integration steps of the mission (the clock)
         # nominal moves (see snapshot) are at least a control period long
         most = math.ceil(self.dynamics.max_time / self.dynamics.control_period)
-        self.state_space["steps_left"] = gymnasium.spaces.Box(0, most, (), np.int64)
-        self._observation_space["steps_left"] = gymnasium.spaces.Box(0, most, (), np.int64)
+        clock = gymnasium.spaces.Box(0, most, (), np.int64)
+        self.state_space["steps_left"] = self._observation_space["steps_left"] = clock
 
     # ------------------------------------------------------------------ public state
     @property

@@ -223,12 +223,9 @@ class CoverageEnv(ParallelEnv):
             self._map_source.max_waypoints, self._map_source.max_waypoint_edges, base.num_robots
         )
         action_mask = gymnasium.spaces.Box(0, 1, (NUM_ACTIONS,), np.int8)
+        clock = gymnasium.spaces.Box(0, base.max_steps, (), np.int64)  # steps_left
         self._observation_space = graph_space(
-            self._ego_shape,
-            {
-                "action_mask": action_mask,
-                "steps_left": gymnasium.spaces.Box(0, base.max_steps, (), np.int64),
-            },
+            self._ego_shape, {"action_mask": action_mask, "steps_left": clock}
         )
         self._action_spaces = {
             a: gymnasium.spaces.Discrete(NUM_ACTIONS) for a in self.possible_agents
@@ -241,7 +238,7 @@ class CoverageEnv(ParallelEnv):
                 "robot_nodes": gymnasium.spaces.Box(
                     0, self._state_shape.max_nodes - 1, (r,), np.int64
                 ),
-                "steps_left": gymnasium.spaces.Box(0, base.max_steps, (), np.int64),
+                "steps_left": clock,
             },
         )
         self._rng: np.random.Generator | None = None

@@ -176,14 +176,19 @@ def test_label_agreement_script(tmp_path) -> None:
     config.write_text(f"dataset: {data}\nholdout_seeds: [100, 100]\nval_fraction: 0.5\n")
     out = tmp_path / "agreement.json"
     command = [sys.executable, str(ROOT / "scripts" / "label_agreement.py"), "--config"]
-    done = subprocess.run(
-        [*command, str(config), "--states", "3", "--out", str(out)],
-        capture_output=True,
-        text=True,
-        cwd=ROOT,
-        timeout=600,
-    )
-    assert done.returncode == 0, done.stderr
+
+    def run(*args: str) -> subprocess.CompletedProcess:
+        done = subprocess.run(
+            [*command, str(config), "--states", "3", *args],
+            capture_output=True,
+            text=True,
+            cwd=ROOT,
+            timeout=600,
+        )
+        assert done.returncode == 0, done.stderr
+        return done
+
+    done = run("--out", str(out))
     record = json.loads(out.read_text())
     assert len(record["episodes"]) == 2 and record["total"] == 2 * 3 * 4  # 4 robots
     assert record["expert"] == {"backend": "pyvrp", "time_limit": 0.5, "iterations": 100}
@@ -197,14 +202,7 @@ def test_label_agreement_script(tmp_path) -> None:
     assert ["all", str(record["agreed"]), str(record["total"])] in [row[:3] for row in rows]
     # The shipped BC model on the same states: the same sampled states, its own agreement.
     gnn_out = tmp_path / "gnn.json"
-    done = subprocess.run(
-        [*command, str(config), "--states", "3", "--relabel", "gnn", "--out", str(gnn_out)],
-        capture_output=True,
-        text=True,
-        cwd=ROOT,
-        timeout=600,
-    )
-    assert done.returncode == 0, done.stderr
+    run("--relabel", "gnn", "--out", str(gnn_out))
     gnn = json.loads(gnn_out.read_text())
     assert gnn["relabel"] == "gnn" and gnn["checkpoint"].endswith("bc/coverage_gnn.pt")
     assert gnn["episodes"] == record["episodes"] and gnn["total"] == record["total"]
