@@ -268,7 +268,7 @@ class QuadrotorCoverageEnv(CoverageEnv):
     ) -> tuple[dict[str, dict[str, np.ndarray]], dict[str, dict[str, Any]]]:
         """Starts a mission: the discrete reset, then robots hovering over their start
         waypoints at their altitudes. ``seed`` and ``options`` as in :meth:`CoverageEnv.reset`."""
-        super().reset(seed=seed, options=options)
+        self._start_episode(seed, options)
         d = self.dynamics
         self._visit_radius = d.visit_radius
         if self._visit_radius is None:

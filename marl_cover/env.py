@@ -286,13 +286,21 @@ class CoverageEnv(ParallelEnv):
             options: ``robot_nodes`` (start waypoints, one per robot) and ``interest_nodes``
                 (the points of interest) fix those draws; other keys are ignored with a warning.
         """
+        self._start_episode(seed, options)
+        zeros = np.zeros(self.config.num_robots, dtype=np.int64)
+        infos = self._infos(zeros, zeros.astype(bool), zeros.astype(bool))
+        return self._observe(), infos
+
+    def _start_episode(self, seed: int | None, options: dict[str, Any] | None) -> None:
+        """The draws and the episode state of :meth:`reset`, without building observations
+        (subclasses that extend the state observe once, after their own part)."""
         if seed is not None and not (isinstance(seed, numbers.Integral) and seed >= 0):
             raise ValueError(f"seed must be a non-negative integer or None, got {seed!r}")
         if seed is not None or self._rng is None:
             self._rng = np.random.default_rng(seed)
         options = dict(options or {})
         for key in sorted(set(options) - set(RESET_OPTIONS)):
-            warnings.warn(f"reset ignores unknown option {key!r}", stacklevel=2)
+            warnings.warn(f"reset ignores unknown option {key!r}", stacklevel=3)
         graph = self._map_source.sample(self._rng)
         if graph is not self._graph:
             self._graph = graph
@@ -309,9 +317,6 @@ class CoverageEnv(ParallelEnv):
         self._credits = np.zeros(self.config.num_robots, dtype=np.int64)
         self._trails: list[np.ndarray] = [self._robot_node.copy()]
         self.agents = self.possible_agents[:]
-        zeros = np.zeros(self.config.num_robots, dtype=np.int64)
-        infos = self._infos(zeros, zeros.astype(bool), zeros.astype(bool))
-        return self._observe(), infos
 
     def _sensor_footprints(self, graph: SpatialGraph) -> Any:
         """Exploration: what a robot on each waypoint senses (``None`` in coverage)."""

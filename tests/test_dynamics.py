@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -211,6 +212,14 @@ def small_quadrotor_env(**dynamics) -> QuadrotorCoverageEnv:
 def test_pettingzoo_api_and_seeding() -> None:
     parallel_api_test(small_quadrotor_env(), num_cycles=200)
     parallel_seed_test(lambda: small_quadrotor_env(noise_std=0.2, delay=0.1))
+
+
+def test_reset_warns_about_unknown_options_at_the_callers_line() -> None:
+    for env in (small_quadrotor_env(), marl_cover.parallel_env(map="city", city_size=80)):
+        with pytest.warns(UserWarning, match="reset ignores unknown option 'bogus'") as record:
+            obs, _ = env.reset(seed=0, options={"bogus": 1})
+        assert [Path(w.filename).name for w in record] == [Path(__file__).name]
+        assert sorted(obs) == env.possible_agents
 
 
 def test_same_seed_and_actions_give_the_same_flight_bit_for_bit() -> None:
