@@ -23,6 +23,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from agents.cli import read_result, write_bytes_atomic, write_text_atomic  # noqa: E402
+from agents.comparison import sem  # noqa: E402
 from agents.configuration import as_dict, load_or_exit  # noqa: E402
 from agents.mission import (  # noqa: E402
     MissionConfig,
@@ -58,10 +59,6 @@ def fly_all(config: MissionConfig, out: Path) -> dict[str, list[dict]]:
                 flush=True,
             )
     return results
-
-
-def sem(values: np.ndarray) -> float:
-    return float(values.std(ddof=1) / np.sqrt(len(values))) if len(values) > 1 else 0.0
 
 
 def table(config: MissionConfig, results: dict[str, list[dict]]) -> dict:

@@ -134,3 +134,63 @@ def test_cli_evaluates_a_gnn_checkpoint_both_ways(tmp_path) -> None:
         assert got == [r.reward for r in expected.results]
     result = run_cli("policy=gnn", f"checkpoint={tmp_path / 'missing.pt'}", "episodes=1")
     assert result.returncode != 0 and "missing.pt" in result.stderr
+
+
+def write_rewards(path: Path, rewards: dict[int, float]) -> Path:
+    lines = ["seed,reward,coverage"] + [f"{s},{r},0.5" for s, r in rewards.items()]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_paired_comparison_of_two_runs(tmp_path: Path) -> None:
+    from agents.comparison import compare, read_rewards
+
+    base = read_rewards(write_rewards(tmp_path / "a.csv", {0: 10.0, 1: 20.0, 2: 30.0}))
+    # same seeds in another order: differences +2, -1, +5
+    other = read_rewards(write_rewards(tmp_path / "b.csv", {2: 35.0, 0: 12.0, 1: 19.0}))
+    row = compare(base, other, "a", "b")
+    assert (row.episodes, row.base_mean, row.other_mean) == (3, 20.0, 22.0)
+    assert row.difference == pytest.approx(2.0)
+    assert row.difference_sem == pytest.approx(3.0 / 3**0.5)  # std of (2, -1, 5) is 3
+    assert row.base_sem == pytest.approx(10.0 / 3**0.5)
+    assert row.ratio == pytest.approx(1.1) and (row.wins, row.losses) == (2, 1)
+
+
+def test_comparison_refuses_unpaired_or_broken_files(tmp_path: Path) -> None:
+    from agents.comparison import compare, read_rewards
+
+    with pytest.raises(ValueError, match=r"a and b are not paired: seeds only in a \[2\] \(1\)"):
+        compare({0: 1.0, 1: 1.0, 2: 1.0}, {0: 1.0, 1: 2.0}, "a", "b")
+    twice = tmp_path / "twice.csv"
+    twice.write_text("seed,reward\n0,1\n0,2\n")
+    with pytest.raises(ValueError, match="twice.csv, line 3: seed 0 appears twice"):
+        read_rewards(twice)
+    no_reward = tmp_path / "no_reward.csv"
+    no_reward.write_text("seed,score\n0,1\n")
+    with pytest.raises(ValueError, match=r"no_reward.csv: no column \['reward'\]"):
+        read_rewards(no_reward)
+    text = tmp_path / "text.csv"
+    text.write_text("seed,reward\n0,lots\n")
+    with pytest.raises(ValueError, match="text.csv, line 2: .* is not a number"):
+        read_rewards(text)
+
+
+def test_compare_script_prints_and_writes_the_table(tmp_path: Path) -> None:
+    base = write_rewards(tmp_path / "greedy.csv", {0: 10.0, 1: 20.0})
+    other = write_rewards(tmp_path / "gnn.csv", {0: 13.0, 1: 21.0})
+    out = tmp_path / "cmp.json"
+    script = str(ROOT / "scripts" / "compare.py")
+    done = subprocess.run(
+        [sys.executable, script, str(base), str(other), "--out", str(out)],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    assert "+2.00 +- 1.00" in done.stdout and "1.133" in done.stdout
+    assert json.loads(out.read_text())[0]["difference"] == 2.0
+    bad = subprocess.run(
+        [sys.executable, script, str(base), str(tmp_path / "missing.csv")],
+        capture_output=True,
+        text=True,
+    )
+    assert bad.returncode == 1 and "missing.csv" in bad.stderr

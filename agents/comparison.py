@@ -1,0 +1,137 @@
+"""Paired comparisons of evaluation runs: per-seed differences of two methods' rewards.
+
+``scripts/evaluate.py`` (and ``scripts/generalize.py``) write one row per episode seed. Two
+methods evaluated on the same seeds saw the same maps, starts and points of interest, so the
+SEM of their per-seed differences is far smaller than either method's own SEM; this is the
+figure the project's results quote as "paired +d +- s".
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+
+def sem(values: np.ndarray) -> float:
+    """Standard error of the mean (ddof 1); 0 for fewer than two values."""
+    return float(values.std(ddof=1) / math.sqrt(len(values))) if len(values) > 1 else 0.0
+
+
+@dataclass(frozen=True)
+class PairedComparison:
+    """``other`` against ``base`` over the seeds both were evaluated on.
+
+    Attributes:
+        base: Name of the baseline run.
+        other: Name of the compared run.
+        episodes: Number of paired seeds.
+        base_mean: Mean reward of the baseline (its SEM in ``base_sem``).
+        other_mean: Mean reward of the compared run (its SEM in ``other_sem``).
+        difference: Mean of the per-seed differences ``other - base``.
+        difference_sem: SEM of the per-seed differences.
+        ratio: ``other_mean / base_mean`` (the ratio of the means; NaN if ``base_mean`` is 0).
+        wins: Seeds where ``other`` scored more than ``base`` (``losses``: less).
+    """
+
+    base: str
+    other: str
+    episodes: int
+    base_mean: float
+    base_sem: float
+    other_mean: float
+    other_sem: float
+    difference: float
+    difference_sem: float
+    ratio: float
+    wins: int
+    losses: int
+
+    def as_dict(self) -> dict[str, Any]:
+        """Plain types, for JSON."""
+        return asdict(self)
+
+
+def read_rewards(path: str | Path) -> dict[int, float]:
+    """Reward per seed from an evaluation CSV (columns ``seed`` and ``reward``).
+
+    Raises:
+        FileNotFoundError: no such file.
+        ValueError: a column is missing, a value is not a number, or a seed repeats (the
+            message names the file and the row).
+    """
+    path = Path(path)
+    with path.open(newline="") as handle:
+        reader = csv.DictReader(handle)
+        missing = {"seed", "reward"} - set(reader.fieldnames or ())
+        if missing:
+            raise ValueError(f"{path}: no column {sorted(missing)} (has {reader.fieldnames})")
+        rewards: dict[int, float] = {}
+        for row_number, row in enumerate(reader, start=2):
+            try:
+                seed, reward = int(row["seed"]), float(row["reward"])
+            except (TypeError, ValueError):
+                raise ValueError(
+                    f"{path}, line {row_number}: seed {row['seed']!r} / reward "
+                    f"{row['reward']!r} is not a number"
+                ) from None
+            if seed in rewards:
+                raise ValueError(f"{path}, line {row_number}: seed {seed} appears twice")
+            rewards[seed] = reward
+    if not rewards:
+        raise ValueError(f"{path}: no episodes")
+    return rewards
+
+
+def compare(
+    base: dict[int, float],
+    other: dict[int, float],
+    base_name: str = "base",
+    other_name: str = "other",
+) -> PairedComparison:
+    """Pairs two runs seed by seed.
+
+    Args:
+        base: Reward per seed of the baseline.
+        other: Reward per seed of the compared run.
+        base_name: Name of the baseline in messages and in the result.
+        other_name: Name of the compared run.
+
+    Raises:
+        ValueError: the two runs were not evaluated on the same seeds (the message lists the
+            seeds only one of them has).
+    """
+    if set(base) != set(other):
+        only_base = sorted(set(base) - set(other))
+        only_other = sorted(set(other) - set(base))
+        raise ValueError(
+            f"{base_name} and {other_name} are not paired: seeds only in {base_name} "
+            f"{_head(only_base)}, only in {other_name} {_head(only_other)}"
+        )
+    seeds = sorted(base)
+    a = np.array([base[s] for s in seeds], dtype=np.float64)  # (episodes,)
+    b = np.array([other[s] for s in seeds], dtype=np.float64)  # (episodes,)
+    diff = b - a  # (episodes,)
+    return PairedComparison(
+        base=base_name,
+        other=other_name,
+        episodes=len(seeds),
+        base_mean=float(a.mean()),
+        base_sem=sem(a),
+        other_mean=float(b.mean()),
+        other_sem=sem(b),
+        difference=float(diff.mean()),
+        difference_sem=sem(diff),
+        ratio=float(b.mean() / a.mean()) if a.mean() != 0 else math.nan,
+        wins=int((diff > 0).sum()),
+        losses=int((diff < 0).sum()),
+    )
+
+
+def _head(seeds: list[int], limit: int = 8) -> str:
+    text = ", ".join(str(s) for s in seeds[:limit])
+    return f"[{text}{', ...' if len(seeds) > limit else ''}] ({len(seeds)})"
