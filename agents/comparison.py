@@ -116,17 +116,18 @@ def compare(
     a = np.array([base[s] for s in seeds], dtype=np.float64)  # (episodes,)
     b = np.array([other[s] for s in seeds], dtype=np.float64)  # (episodes,)
     diff = b - a  # (episodes,)
+    base_mean, other_mean = float(a.mean()), float(b.mean())
     return PairedComparison(
         base=base_name,
         other=other_name,
         episodes=len(seeds),
-        base_mean=float(a.mean()),
+        base_mean=base_mean,
         base_sem=sem(a),
-        other_mean=float(b.mean()),
+        other_mean=other_mean,
         other_sem=sem(b),
         difference=float(diff.mean()),
         difference_sem=sem(diff),
-        ratio=float(b.mean() / a.mean()) if a.mean() != 0 else math.nan,
+        ratio=other_mean / base_mean if base_mean != 0 else math.nan,
         wins=int((diff > 0).sum()),
         losses=int((diff < 0).sum()),
     )
