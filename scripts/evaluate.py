@@ -4,6 +4,7 @@
         map=paper out=results.json
     python scripts/evaluate.py policy=expert expert.backend=ortools expert.time_limit=1.0
     python scripts/evaluate.py policy=expert_rh hops=19 expert.time_limit=0.15
+    python scripts/evaluate.py policy=expert_rh hops=19 expert.clock=false expert.iterations=200
     python scripts/evaluate.py task=exploration policy=expert_rh expert.information=known map=paper
     python scripts/evaluate.py policy=gnn map=paper                 # the shipped model
     python scripts/evaluate.py policy=gnn checkpoint=outputs/bc/nonlinear_k19/best.pt \
@@ -14,7 +15,8 @@ Tasks: ``coverage`` or ``exploration`` (the map is discovered with a range senso
 omniscient by default (``expert.information=full``, the imitation teacher) or fair
 (``expert.information=known``: only what the team has discovered).
 Policies: ``greedy`` (each robot on its ego-graph), ``greedy_central`` (same actions, from
-``state()``), ``expert`` (open-loop routing), ``expert_rh`` (receding horizon over ``hops``),
+``state()``), ``expert`` (open-loop routing), ``expert_rh`` (receding horizon over ``hops``;
+``expert.clock=false``: over ``hops`` steps even near the end, blind to the clock),
 ``gnn`` (the shipped model of the task, or ``checkpoint=PATH``; each robot on its own ego-graph,
 or ``gnn.centralized=true`` for one pass over ``state()``; argmax actions unless
 ``gnn.deterministic=false``). A GNN runs with the receptive field it was trained with: ``hops``
@@ -51,6 +53,8 @@ class ExpertOptions:
     seed: int = 0
     warm_start: bool = True
     information: str = "full"
+    clock: bool = True  # expert_rh: false plans over `hops` steps even when fewer are left
+    iterations: int | None = None  # PyVRP iterations per solve instead of time_limit
 
 
 @dataclass
@@ -120,6 +124,8 @@ def parse_overrides(
         raise SystemExit(str(error)) from error
     if options.policy not in POLICIES:
         raise SystemExit(f"unknown policy {options.policy!r}; policies: {list(POLICIES)}")
+    if not expert.clock and options.policy != "expert_rh":
+        raise SystemExit("expert.clock=false applies to policy=expert_rh only")
     return options, expert, gnn, env
 
 
@@ -169,6 +175,8 @@ def make_policy(
         seed=expert.seed,
         warm_start=expert.warm_start,
         information=expert.information,
+        clock=expert.clock,
+        max_iterations=expert.iterations,
     )
 
 

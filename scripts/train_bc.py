@@ -4,6 +4,8 @@
     python scripts/train_bc.py model.kind=linear model.hops=7 out=outputs/bc/linear_k7
     python scripts/train_bc.py --config configs/bc_coverage.yaml steps=300 max_episodes=20
     python scripts/train_bc.py dagger.rounds=2 dagger.episodes=50
+    python scripts/train_bc.py init=MODEL.pt steps=0 dagger.rounds=4 dagger.fraction=0.5 \
+        dagger.expert_mode=receding dagger.expert_horizon=19 dagger.expert_clock=false
 
 Re-running with the same ``out`` resumes from ``out/checkpoint.pt``. Any key of
 ``agents.training.bc.BCConfig`` (``section.key`` for ``model.*`` and ``dagger.*``) can be

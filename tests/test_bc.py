@@ -298,6 +298,33 @@ def test_dagger_labels_the_states_the_learner_visits(tmp_path) -> None:
         assert (labels >= 0).all()  # every label is a legal move
 
 
+def test_dagger_can_label_with_a_receding_expert_blind_to_the_clock(tmp_path) -> None:
+    pytest.importorskip("pyvrp")
+    from agents.datasets import read_shard
+    from agents.experts import RoutingExpert
+
+    small_dataset(tmp_path / "data")
+    dagger = DaggerConfig(
+        rounds=1, episodes=1, beta=0.0, steps=10, iterations=30, seed=700,
+        expert_mode="receding", expert_horizon=20, expert_clock=False,
+    )  # fmt: skip
+    train_bc(small_config(tmp_path, "blind", steps=10, val_every=10, dagger=dagger))
+    (episode,) = read_shard(tmp_path / "blind" / "dagger" / "shard_00000.npz")
+    env = marl_cover.parallel_env(**SMALL_ENV)
+    env.reset(seed=episode.seed)
+    expert = RoutingExpert(mode="receding", horizon=20, clock=False, max_iterations=30, seed=700)
+    assert np.array_equal(expert.act_snapshot(env.snapshot()), episode.actions[0])
+    for bad, message in [
+        ({"expert_mode": "closed"}, "expert_mode"),
+        ({"expert_mode": "receding"}, "expert_horizon"),
+        ({"expert_clock": False}, "expert_clock=false needs"),
+    ]:
+        with pytest.raises(ValueError, match=message):
+            DaggerConfig(**bad)
+    with pytest.raises(ValueError, match="clock=False needs mode 'receding'"):
+        RoutingExpert(clock=False)
+
+
 def test_dagger_fraction_fixes_the_share_of_learner_states_in_a_batch(
     tmp_path, monkeypatch
 ) -> None:

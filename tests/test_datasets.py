@@ -166,6 +166,14 @@ def test_a_clock_blind_snapshot_plans_for_the_steps_it_is_told() -> None:
     assert np.array_equal(blind.robot_node, snapshot.robot_node)
     with pytest.raises(ValueError, match="steps_left"):
         with_steps_left(snapshot, 0)
+    # a receding plan over 30 steps is cut to the 11 left, unless it is blind to the clock
+    assert build_problem(snapshot, horizon=30).budget.tolist() == [11, 11, 11]
+    assert build_problem(snapshot, horizon=5).budget.tolist() == [5, 5, 5]
+    unclocked = build_problem(snapshot, horizon=30, clock=False)
+    assert unclocked.budget.tolist() == [30, 30, 30]
+    assert np.array_equal(unclocked.distance, build_problem(blind).distance)
+    with pytest.raises(ValueError, match="needs a horizon"):
+        build_problem(snapshot, clock=False)
 
 
 def test_label_agreement_script(tmp_path) -> None:

@@ -58,6 +58,22 @@ def test_cli_writes_json_and_csv(tmp_path) -> None:
     assert out.with_suffix(".csv").read_text().splitlines()[0].startswith("seed,reward")
 
 
+def test_cli_evaluates_a_receding_expert_blind_to_the_clock(tmp_path) -> None:
+    pytest.importorskip("pyvrp")
+    from agents.experts import RoutingExpert
+
+    out = tmp_path / "blind.json"
+    args = ("policy=expert_rh", "hops=4", "episodes=2", "seed=3", "max_steps=8", "num_robots=2")
+    result = run_cli(*args, "expert.clock=false", "expert.iterations=20", f"out={out}")
+    assert result.returncode == 0, result.stderr
+    rewards = [r["reward"] for r in json.loads(out.read_text())["summary"]["results"]]
+    env = marl_cover.parallel_env(max_steps=8, num_robots=2, hops=4)
+    expert = RoutingExpert(mode="receding", horizon=4, clock=False, max_iterations=20)
+    assert rewards == [r.reward for r in evaluate(env, expert, [3, 4]).results]
+    result = run_cli("policy=expert", "expert.clock=false")
+    assert result.returncode != 0 and "policy=expert_rh only" in result.stderr
+
+
 def test_cli_rejects_unknown_keys() -> None:
     result = run_cli("polcy=greedy")
     assert result.returncode != 0 and "polcy" in result.stderr

@@ -7,7 +7,9 @@ Modes:
   (the collision resolver blocked it) or a robot can no longer reach its remaining stops in
   the steps left.
 - ``"receding"``: plan every step over ``horizon`` steps (the paper's K) and take the first
-  hop of each route.
+  hop of each route; fewer near the end of the episode, unless ``clock=False``: a planner blind
+  to the clock always plans over ``horizon`` steps, so its action is a function of where the
+  robots and the points are (what a policy without the time sees), not of the steps left.
 
 Information (exploration):
 
@@ -93,6 +95,8 @@ class RoutingExpert:
         max_iterations: Stop each solve after this many iterations (PyVRP) or solutions
             (OR-Tools) instead of ``time_limit``: deterministic plans, for datasets.
         information: ``"full"`` (omniscient) or ``"known"`` (only what the team discovered).
+        clock: ``False`` (receding mode only): plan over ``horizon`` steps at every step, even
+            when fewer are left in the episode.
     """
 
     def __init__(
@@ -106,6 +110,7 @@ class RoutingExpert:
         warm_start: bool = True,
         fallback_reach: int | None = None,
         information: str = "full",
+        clock: bool = True,
     ) -> None:
         if backend not in BACKENDS:
             raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
@@ -113,6 +118,8 @@ class RoutingExpert:
             raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
         if mode == "receding" and (horizon is None or horizon < 1):
             raise ValueError("mode 'receding' needs a horizon >= 1")
+        if not clock and mode != "receding":
+            raise ValueError("clock=False needs mode 'receding' (a plan over a fixed horizon)")
         if information not in INFORMATION:
             raise ValueError(f"information must be one of {INFORMATION}, got {information!r}")
         if time_limit < 0:
@@ -126,6 +133,7 @@ class RoutingExpert:
         self.warm_start = warm_start
         self.fallback_reach = fallback_reach
         self.information = information
+        self.clock = clock
         self.counts: Counter[str] = Counter()
         self.info: dict[str, Any] = {}
         self.reset()
@@ -146,7 +154,7 @@ class RoutingExpert:
         ``"failed_solve"``).
         """
         horizon = self.horizon if self.mode == "receding" else None
-        problem = build_problem(snapshot, horizon)
+        problem = build_problem(snapshot, horizon, self.clock)
         initial = self._warm_start(problem)
         start = time.perf_counter()
         try:

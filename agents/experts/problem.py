@@ -56,16 +56,26 @@ class RoutingProblem:
         return all(self.route_length(r, route) <= self.budget[r] for r, route in enumerate(routes))
 
 
-def build_problem(snapshot: CoverageSnapshot, horizon: int | None = None) -> RoutingProblem:
+def build_problem(
+    snapshot: CoverageSnapshot, horizon: int | None = None, clock: bool = True
+) -> RoutingProblem:
     """The routing problem of the current state.
 
     Args:
         snapshot: The environment's public snapshot.
         horizon: Plan over at most this many steps (receding horizon); ``None`` plans over the
             steps left in the episode (open loop).
+        clock: ``False``: plan over ``horizon`` steps even when fewer are left in the episode
+            (a planner blind to the clock, whose plan depends only on where the robots and the
+            points are).
+
+    Raises:
+        ValueError: ``clock=False`` without a ``horizon``.
     """
+    if not clock and horizon is None:
+        raise ValueError("a plan blind to the clock (clock=False) needs a horizon")
     steps_left = snapshot.max_steps - snapshot.num_steps
-    limit = steps_left if horizon is None else min(horizon, steps_left)
+    limit = horizon if not clock else steps_left if horizon is None else min(horizon, steps_left)
     robots = snapshot.robot_node
     budget = np.full(len(robots), limit, dtype=np.int64)
     graph = snapshot.graph

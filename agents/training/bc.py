@@ -18,7 +18,8 @@ episode is used instead of the first 200):
 5. DAgger (``dagger.rounds > 0``; ``init`` and ``steps=0`` run it from an earlier model):
    play the current policy (executing the expert's action with probability ``beta``,
    decaying per round), label every visited state with the expert
-   re-planned from that state, add the labelled states to the buffer (and to disk, as dataset
+   re-planned from that state (or, ``dagger.expert_mode=receding``, a receding-horizon expert,
+   blind to the clock with ``dagger.expert_clock=false``), add the labelled states to the buffer (and to disk, as dataset
    shards), and train ``dagger.steps`` more steps with a fresh learning-rate schedule. With
    ``dagger.fraction`` the labelled states have a buffer of their own and fill that share of
    every batch (otherwise they are a few percent of the transitions).
@@ -67,6 +68,13 @@ class DaggerConfig:
         fraction: Share of every batch drawn from the DAgger states once there are any (the
             rest from the expert dataset). ``None``: the DAgger states join the dataset and
             are drawn as often as any transition (a few percent of a batch).
+        expert_mode: The labelling expert: ``"open_loop"`` (the dataset's expert, re-planned
+            from each state the learner leads to) or ``"receding"`` (plans over
+            ``expert_horizon`` steps at every state).
+        expert_horizon: Planning horizon of the receding expert, in steps.
+        expert_clock: ``False``: the receding expert plans over ``expert_horizon`` steps even
+            near the end of the episode, so its labels depend only on what the (clock-blind)
+            network sees.
     """
 
     rounds: int = 0
@@ -77,10 +85,23 @@ class DaggerConfig:
     iterations: int = 500
     seed: int = 1_000_000
     fraction: float | None = None
+    expert_mode: str = "open_loop"
+    expert_horizon: int | None = None
+    expert_clock: bool = True
 
     def __post_init__(self) -> None:
         if self.fraction is not None and not 0.0 < self.fraction < 1.0:
             raise ValueError(f"dagger.fraction must be in (0, 1) or null, got {self.fraction}")
+        if self.expert_mode not in ("open_loop", "receding"):
+            raise ValueError(
+                f"dagger.expert_mode must be 'open_loop' or 'receding', got {self.expert_mode!r}"
+            )
+        if self.expert_mode == "receding" and (
+            self.expert_horizon is None or self.expert_horizon < 1
+        ):
+            raise ValueError("dagger.expert_mode=receding needs dagger.expert_horizon >= 1")
+        if not self.expert_clock and self.expert_mode != "receding":
+            raise ValueError("dagger.expert_clock=false needs dagger.expert_mode=receding")
 
 
 @dataclass
@@ -225,8 +246,9 @@ def dagger_round(
 ) -> list[Episode]:
     """Rolls out the mixed policy and labels every visited state with the expert.
 
-    The expert (open loop) re-plans whenever the robots are not where its plan expected, so its
-    label at a state the learner led to is the first hop of a fresh plan from that state.
+    The open-loop expert re-plans whenever the robots are not where its plan expected, so its
+    label at a state the learner led to is the first hop of a fresh plan from that state; the
+    receding expert (``dagger.expert_mode``) plans afresh at every state.
     """
     from agents.experts import RoutingExpert
 
@@ -236,7 +258,13 @@ def dagger_round(
     first = dagger.seed + round_index * dagger.episodes
     episodes = []
     for seed in range(first, first + dagger.episodes):
-        expert = RoutingExpert(max_iterations=dagger.iterations, seed=seed)
+        expert = RoutingExpert(
+            mode=dagger.expert_mode,
+            horizon=dagger.expert_horizon,
+            clock=dagger.expert_clock,
+            max_iterations=dagger.iterations,
+            seed=seed,
+        )
         rng = np.random.default_rng(seed)
         env.reset(seed=seed)
         start = env.snapshot()
