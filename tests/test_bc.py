@@ -325,6 +325,36 @@ def test_dagger_can_label_with_a_receding_expert_blind_to_the_clock(tmp_path) ->
         RoutingExpert(clock=False)
 
 
+def test_more_dagger_rounds_continue_a_finished_run(tmp_path) -> None:
+    pytest.importorskip("pyvrp")
+    import yaml
+
+    small_dataset(tmp_path / "data")
+
+    def config(out: str, rounds: int, **dagger) -> BCConfig:  # noqa: ANN003
+        values = {"episodes": 1, "beta": 0.0, "steps": 10, "iterations": 30, "seed": 900}
+        rounds_config = DaggerConfig(rounds=rounds, fraction=0.5, **{**values, **dagger})
+        return small_config(tmp_path, out, steps=10, val_every=10, dagger=rounds_config)
+
+    train_bc(config("whole", 2))
+    train_bc(config("parts", 1))
+    # a run saved before the expert_* keys existed reads them as their defaults
+    saved = tmp_path / "parts" / "config.yaml"
+    record = yaml.safe_load(saved.read_text())
+    for key in ("expert_mode", "expert_horizon", "expert_clock"):
+        del record["dagger"][key]
+    saved.write_text(yaml.safe_dump(record))
+    resumed = train_bc(config("parts", 2))
+    assert resumed["step"] == 30
+    assert len(list((tmp_path / "parts" / "dagger").glob("shard_*.npz"))) == 2
+    whole, _ = load_model(tmp_path / "whole" / "model.pt")
+    parts, _ = load_model(tmp_path / "parts" / "model.pt")
+    for a, b in zip(whole.state_dict().values(), parts.state_dict().values(), strict=True):
+        assert torch.equal(a, b)
+    with pytest.raises(ValueError, match=r"other settings \(\['dagger.episodes'\]\)"):
+        train_bc(config("parts", 3, episodes=2))
+
+
 def test_dagger_fraction_fixes_the_share_of_learner_states_in_a_batch(
     tmp_path, monkeypatch
 ) -> None:

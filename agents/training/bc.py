@@ -17,15 +17,17 @@ episode is used instead of the first 200):
    ``best.pt`` when the selection reward improves.
 5. DAgger (``dagger.rounds > 0``; ``init`` and ``steps=0`` run it from an earlier model):
    play the current policy (executing the expert's action with probability ``beta``,
-   decaying per round), label every visited state with the expert
-   re-planned from that state (or, ``dagger.expert_mode=receding``, a receding-horizon expert,
-   blind to the clock with ``dagger.expert_clock=false``), add the labelled states to the buffer (and to disk, as dataset
-   shards), and train ``dagger.steps`` more steps with a fresh learning-rate schedule. With
-   ``dagger.fraction`` the labelled states have a buffer of their own and fill that share of
-   every batch (otherwise they are a few percent of the transitions).
+   decaying per round), label every visited state with the expert re-planned from that state
+   (or, ``dagger.expert_mode=receding``, a receding-horizon expert, blind to the clock with
+   ``dagger.expert_clock=false``), add the labelled states to the buffer (and to disk, as
+   dataset shards), and train ``dagger.steps`` more steps with a fresh learning-rate schedule.
+   With ``dagger.fraction`` the labelled states have a buffer of their own and fill that share
+   of every batch (otherwise they are a few percent of the transitions).
 
 Resuming: ``checkpoint.pt`` holds the model, the optimiser, the sampler, the RNG states and the
-phase; DAgger rounds already labelled are read back from ``out/dagger``.
+phase; DAgger rounds already labelled are read back from ``out/dagger``. A finished run
+resumed with more ``dagger.rounds`` (or a copy of its folder under another ``out``) goes on
+with the next round, as one longer run would have.
 """
 
 from __future__ import annotations
@@ -315,7 +317,13 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
     out.mkdir(parents=True, exist_ok=True)
     record = configuration.as_dict(config)
     config_path = out / "config.yaml"
-    check_same_run(config_path, record, ignored=("progress", "steps"))
+    # more DAgger rounds continue a finished run (the rounds done are read back from disk)
+    check_same_run(
+        config_path,
+        record,
+        ignored=("progress", "out", "steps", "dagger.rounds"),
+        defaults=configuration.as_dict(BCConfig()),
+    )
     write_text_atomic(config_path, yaml.safe_dump(record, sort_keys=False))
 
     # seeding: torch (initialisation, sampling order) and numpy (split) from one seed

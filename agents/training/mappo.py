@@ -335,7 +335,7 @@ def train_mappo(config: MAPPOConfig) -> dict[str, Any]:
     out = Path(config.out)
     out.mkdir(parents=True, exist_ok=True)
     record = configuration.as_dict(config)
-    check_same_run(out / "config.yaml", record, ignored=("progress", "collector"))
+    check_same_run(out / "config.yaml", record, ignored=("progress", "out", "collector"))
     write_text_atomic(out / "config.yaml", yaml.safe_dump(record, sort_keys=False))
     torch.manual_seed(config.seed)
     torch.set_num_threads(config.threads)

@@ -10,13 +10,21 @@ from typing import Any
 LOGGERS = ("csv", "tensorboard", "none")
 
 
-def check_same_run(path: Path, record: dict[str, Any], ignored: Iterable[str] = ()) -> None:
+def check_same_run(
+    path: Path,
+    record: dict[str, Any],
+    ignored: Iterable[str] = (),
+    defaults: dict[str, Any] | None = None,
+) -> None:
     """Refuses to resume the run whose ``config.yaml`` is ``path`` with other settings.
 
     Args:
         path: The run's saved config (nothing to check if it does not exist yet).
         record: The new run's config as plain dicts.
-        ignored: Top-level keys that may change between sessions (progress bars, lengths).
+        ignored: Keys that may change between sessions (progress bars, lengths): top-level
+            names, or ``section.key`` for one key of a section.
+        defaults: The config's default values as plain dicts: a key that the saved config
+            lacks (a run made before the key existed) reads as its default.
 
     Raises:
         ValueError: another key differs; the message names the keys and the folder.
@@ -25,17 +33,48 @@ def check_same_run(path: Path, record: dict[str, Any], ignored: Iterable[str] = 
 
     if not path.exists():
         return
-    previous = yaml.safe_load(path.read_text()) or {}
+    saved = yaml.safe_load(path.read_text()) or {}
+    previous = _flatten(_merged(defaults or {}, saved))
+    current = _flatten(record)
+    skip = set(ignored)
     changed = sorted(
-        k
-        for k in set(previous) | set(record)
-        if k not in set(ignored) and previous.get(k) != record.get(k)
+        key
+        for key in set(previous) | set(current)
+        if not skip.intersection(_prefixes(key)) and previous.get(key) != current.get(key)
     )
     if changed:
         raise ValueError(
             f"{path.parent} holds a run with other settings ({changed}); use another out= or "
             "delete the folder"
         )
+
+
+def _merged(base: dict[str, Any], update: dict[str, Any]) -> dict[str, Any]:
+    """``base`` with ``update``'s values in place, section by section."""
+    result = dict(base)
+    for key, value in update.items():
+        inner = result.get(key)
+        both = isinstance(inner, dict) and isinstance(value, dict)
+        result[key] = _merged(inner, value) if both else value
+    return result
+
+
+def _flatten(values: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    """``{"a": {"b": 1}}`` as ``{"a.b": 1}``, at any depth."""
+    flat = {}
+    for key, value in values.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, dict) and value:
+            flat.update(_flatten(value, f"{name}."))
+        else:
+            flat[name] = value
+    return flat
+
+
+def _prefixes(key: str) -> list[str]:
+    """``"a.b.c"`` -> ``["a", "a.b", "a.b.c"]``."""
+    parts = key.split(".")
+    return [".".join(parts[: i + 1]) for i in range(len(parts))]
 
 
 def make_logger(kind: str, out: Path) -> Any:
