@@ -90,7 +90,7 @@ def load(cls: type[T], path: str | Path | None = None, overrides: list[str] = ()
         if not isinstance(loaded, dict):
             raise ValueError(f"{path}: a config file must hold a mapping")
         build(cls, loaded, str(path))  # names unknown keys against the file
-        values = _merge(values, loaded)
+        values = merge(values, loaded)
         where = str(path)
     try:
         return build(cls, apply_overrides(values, list(overrides)), f"{where} + overrides")
@@ -111,11 +111,12 @@ def load_or_exit(cls: type[T], path: str | Path | None, overrides: list[str]) ->
         raise SystemExit(f"{Path(sys.argv[0]).stem}: {error}") from error
 
 
-def _merge(base: dict[str, Any], update: dict[str, Any]) -> dict[str, Any]:
+def merge(base: dict[str, Any], update: dict[str, Any]) -> dict[str, Any]:
+    """``base`` with ``update``'s values in place, section by section (a new dict)."""
     merged = dict(base)
     for key, value in update.items():
         if isinstance(value, dict) and isinstance(merged.get(key), dict):
-            merged[key] = _merge(merged[key], value)
+            merged[key] = merge(merged[key], value)
         else:
             merged[key] = value
     return merged

@@ -355,6 +355,49 @@ def test_more_dagger_rounds_continue_a_finished_run(tmp_path) -> None:
         train_bc(config("parts", 3, episodes=2))
 
 
+def test_dagger_can_roll_out_on_another_map_and_team(tmp_path) -> None:
+    pytest.importorskip("pyvrp")
+    from agents.datasets import read_shard
+    from agents.evaluation import evaluate
+    from agents.training.bc import Part, batch_loss
+
+    small_dataset(tmp_path / "data")
+    larger = {"num_robots": 6, "max_steps": 15, "city_size": 120}
+    dagger = DaggerConfig(
+        rounds=1, episodes=2, beta=0.0, steps=10, iterations=30, seed=800, fraction=0.5,
+        env=larger,
+    )  # fmt: skip
+    config = small_config(
+        tmp_path, "apart", steps=10, val_every=10, dagger=dagger, select_env={"num_robots": 6}
+    )
+    assert train_bc(config)["step"] == 20
+    episodes = read_shard(tmp_path / "apart" / "dagger" / "shard_00000.npz")
+    env = marl_cover.parallel_env(**{**SMALL_ENV, **larger})
+    for episode in episodes:
+        assert episode.actions.shape == (15, 6)  # the roll-out env's length and team
+        env.reset(seed=episode.seed)
+        assert episode.graph.num_nodes == env.snapshot().graph.num_nodes
+    # the selection episodes ran on select_env: best.pt reproduces its recorded score
+    best, metadata = load_model(tmp_path / "apart" / "best.pt")
+    select = marl_cover.parallel_env(**{**SMALL_ENV, "num_robots": 6})
+    seeds = range(config.select_seed, config.select_seed + config.select_episodes)
+    score = evaluate(select, GNNPolicy(best, centralized=True), seeds).mean
+    assert score == metadata["select_reward"]
+
+    # a batch in two parts: the mean cross-entropy over the robots of both
+    windows = record(range(2))
+    table = GraphTable([e.graph for e in windows])
+    own_table = GraphTable([e.graph for e in episodes])
+    first = Part(episode_transitions(windows, table.max_nodes)[:5], table, 12)
+    second = Part(episode_transitions(episodes, own_table.max_nodes)[:3], own_table, 15)
+    both, _ = batch_loss(best, first.batch, table, max_steps=12, extra=second)
+    one, _ = batch_loss(best, first.batch, table, max_steps=12)
+    two, _ = batch_loss(best, second.batch, own_table, max_steps=15)
+    assert both.item() == pytest.approx((5 * 4 * one.item() + 3 * 6 * two.item()) / 38, rel=1e-5)
+    with pytest.raises(ValueError, match="dagger.env needs dagger.fraction"):
+        DaggerConfig(env=larger)
+
+
 def test_dagger_fraction_fixes_the_share_of_learner_states_in_a_batch(
     tmp_path, monkeypatch
 ) -> None:

@@ -77,6 +77,10 @@ class DaggerConfig:
         expert_clock: ``False``: the receding expert plans over ``expert_horizon`` steps even
             near the end of the episode, so its labels depend only on what the (clock-blind)
             network sees.
+        env: Overrides of the BC ``env`` for the roll-outs (e.g. ``{"map": "paper_full",
+            "num_robots": 10, "max_steps": 131}``: states of a larger map and team than the
+            dataset's). With any, the DAgger states are collated apart from the dataset's
+            (their own graphs, team size and padding) and ``fraction`` is required.
     """
 
     rounds: int = 0
@@ -90,6 +94,7 @@ class DaggerConfig:
     expert_mode: str = "open_loop"
     expert_horizon: int | None = None
     expert_clock: bool = True
+    env: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if self.fraction is not None and not 0.0 < self.fraction < 1.0:
@@ -104,6 +109,8 @@ class DaggerConfig:
             raise ValueError("dagger.expert_mode=receding needs dagger.expert_horizon >= 1")
         if not self.expert_clock and self.expert_mode != "receding":
             raise ValueError("dagger.expert_clock=false needs dagger.expert_mode=receding")
+        if self.env and self.fraction is None:
+            raise ValueError("dagger.env needs dagger.fraction (the share of its states)")
 
 
 @dataclass
@@ -127,6 +134,7 @@ class BCConfig:
     val_every: int = 1000
     select_episodes: int = 20
     select_seed: int = 10_000
+    select_env: dict[str, Any] = field(default_factory=dict)  # overrides of env for selection
     seed: int = 0
     threads: int = 1
     logger: str = "csv"
@@ -187,20 +195,35 @@ def mixed_batch(dataset: Any, own: Any | None, batch_size: int, own_size: int) -
     return torch.cat([dataset.sample(batch_size - own_size), own.sample(own_size)])
 
 
+@dataclass
+class Part:
+    """Transitions collated together: one padding, one team size, one episode length."""
+
+    batch: Any
+    table: GraphTable
+    max_steps: int | None = None
+
+
 def batch_loss(
     model: AggregationGNN,
     batch: Any,
     table: GraphTable,
     entropy_coef: float = 0.0,
     max_steps: int | None = None,
+    extra: Part | None = None,
 ) -> tuple[torch.Tensor, dict[str, float]]:
     """Mean cross-entropy of the expert's actions over every robot of a batch of transitions
-    (``max_steps``: actions per episode, for a model that reads the time)."""
-    nodes, edge_index, edge_attr, action_edges = collate_states(
-        batch, table, model.config.time_horizon, max_steps
-    )
-    logits = action_logits(model, (nodes, edge_index, edge_attr), action_edges)  # (B*R, 5)
-    target = batch["action"].reshape(-1)
+    (``max_steps``: actions per episode, for a model that reads the time), and of the ``extra``
+    transitions collated apart (DAgger states of another map or team size)."""
+    parts = [Part(batch, table, max_steps)] + ([] if extra is None else [extra])
+    logits, targets = [], []
+    for part in parts:
+        nodes, edge_index, edge_attr, action_edges = collate_states(
+            part.batch, part.table, model.config.time_horizon, part.max_steps
+        )
+        logits.append(action_logits(model, (nodes, edge_index, edge_attr), action_edges))
+        targets.append(part.batch["action"].reshape(-1))
+    logits, target = torch.cat(logits), torch.cat(targets)  # (B*R, 5), (B*R,)
     cross_entropy = functional.cross_entropy(logits, target)
     log_probs = torch.log_softmax(logits, dim=-1)
     probs = log_probs.exp()
@@ -339,7 +362,16 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
     # exploration: transitions carry what the team had discovered (same sensor as the env)
     sensor = env.config.sensor_range if env.config.task == "exploration" else None
     val_data = episode_transitions(val, max_nodes, first_index=len(train), sensor_range=sensor)
-    dagger_capacity = config.dagger.rounds * config.dagger.episodes * env.config.max_steps
+    select_env = CoverageEnv(**{**config.env, **config.select_env}) if config.select_env else env
+    # dagger.env: roll-outs on another map or team, their states collated apart
+    apart = bool(config.dagger.env)
+    rollout_env = CoverageEnv(**{**config.env, **config.dagger.env}) if apart else env
+    rollout_steps = rollout_env.config.max_steps
+    rollout_sensor = (
+        rollout_env.config.sensor_range if rollout_env.config.task == "exploration" else None
+    )
+    own_table: GraphTable | None = None
+    dagger_capacity = config.dagger.rounds * config.dagger.episodes * rollout_steps
     # with dagger.fraction the DAgger states have a buffer of their own, drawn from at that rate
     fraction = config.dagger.fraction
     own_size = 0 if fraction is None else max(1, round(fraction * config.batch_size))
@@ -348,15 +380,32 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
     buffer.extend(episode_transitions(train, max_nodes, sensor_range=sensor))
 
     def add_dagger(episodes: list[Episode]) -> None:
-        nonlocal table
+        nonlocal table, own_table
+        graphs = [e.graph for e in episodes]
+        if apart:
+            first = 0 if own_table is None else len(own_table)
+            if own_table is None:
+                largest = max(g.num_nodes for g in graphs)
+                own_table = GraphTable(graphs, max(rollout_env.max_waypoints, largest))
+            else:
+                own_table = own_table.extended(graphs)
+            own.extend(
+                episode_transitions(
+                    episodes, own_table.max_nodes, first_index=first, sensor_range=rollout_sensor
+                )
+            )
+            return
         first = len(table)
-        table = table.extended([e.graph for e in episodes])
+        table = table.extended(graphs)
         (buffer if own is None else own).extend(
             episode_transitions(episodes, max_nodes, first_index=first, sensor_range=sensor)
         )
 
-    def next_batch() -> Any:
-        return mixed_batch(buffer, own, config.batch_size, own_size)
+    def next_batch() -> tuple[Any, Part | None]:
+        if not apart or len(own) == 0:
+            return mixed_batch(buffer, own, config.batch_size, own_size), None
+        extra = Part(own.sample(own_size), own_table, rollout_steps)
+        return buffer.sample(config.batch_size - own_size), extra
 
     for episodes in dagger_episodes:
         add_dagger(episodes)
@@ -398,7 +447,7 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
     while step < config.total_steps:
         phase, phase_step = _phase(step, config)
         if phase > 0 and phase_step == 0 and len(dagger_episodes) < phase:
-            episodes = dagger_round(model, env, config, phase - 1)
+            episodes = dagger_round(model, rollout_env, config, phase - 1)
             write_shard(out / "dagger" / SHARD_PATTERN.format(phase - 1), episodes)
             dagger_episodes.append(episodes)
             add_dagger(episodes)
@@ -407,8 +456,9 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
                 log.log_scalar("dagger_rollout_reward", reward, step=step)
         for group in optimizer.param_groups:
             group["lr"] = config.lr * config.lr_decay ** (phase_step / config.lr_decay_every)
+        batch, extra = next_batch()
         loss, metrics = batch_loss(
-            model, next_batch(), table, config.entropy_coef, env.config.max_steps
+            model, batch, table, config.entropy_coef, env.config.max_steps, extra=extra
         )
         optimizer.zero_grad()
         loss.backward()
@@ -423,7 +473,7 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
             log.log_scalar("lr", optimizer.param_groups[0]["lr"], step=step)
         if step % config.val_every == 0 or step == config.total_steps:
             scores = validate(model, val_data, table, max_steps=env.config.max_steps)
-            scores["select_reward"] = selection_reward(model, env, config)
+            scores["select_reward"] = selection_reward(model, select_env, config)
             if scores["select_reward"] > best_reward:
                 best_reward = scores["select_reward"]
                 save_model(out / "best.pt", model, {**metadata, "step": step, **scores})

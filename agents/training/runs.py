@@ -7,6 +7,8 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
+from agents.configuration import merge
+
 LOGGERS = ("csv", "tensorboard", "none")
 
 
@@ -34,7 +36,7 @@ def check_same_run(
     if not path.exists():
         return
     saved = yaml.safe_load(path.read_text()) or {}
-    previous = _flatten(_merged(defaults or {}, saved))
+    previous = _flatten(merge(defaults or {}, saved))
     current = _flatten(record)
     skip = set(ignored)
     changed = sorted(
@@ -47,16 +49,6 @@ def check_same_run(
             f"{path.parent} holds a run with other settings ({changed}); use another out= or "
             "delete the folder"
         )
-
-
-def _merged(base: dict[str, Any], update: dict[str, Any]) -> dict[str, Any]:
-    """``base`` with ``update``'s values in place, section by section."""
-    result = dict(base)
-    for key, value in update.items():
-        inner = result.get(key)
-        both = isinstance(inner, dict) and isinstance(value, dict)
-        result[key] = _merged(inner, value) if both else value
-    return result
 
 
 def _flatten(values: dict[str, Any], prefix: str = "") -> dict[str, Any]:
