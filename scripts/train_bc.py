@@ -6,8 +6,13 @@
     python scripts/train_bc.py dagger.rounds=2 dagger.episodes=50
     python scripts/train_bc.py init=MODEL.pt steps=0 dagger.rounds=4 dagger.fraction=0.5 \
         dagger.expert_mode=receding dagger.expert_horizon=19 dagger.expert_clock=false
+    python scripts/train_bc.py init=MODEL.pt steps=0 dagger.rounds=2 dagger.fraction=0.25 \
+        dagger.expert_mode=receding dagger.expert_horizon=19 dagger.expert_clock=false \
+        dagger.env.map=paper_full dagger.env.num_robots=10 dagger.env.max_steps=131 \
+        select_env.map=paper_full select_env.num_robots=10 select_env.max_steps=131 select_seed=100
 
-Re-running with the same ``out`` resumes from ``out/checkpoint.pt``. Any key of
+Re-running with the same ``out`` resumes from ``out/checkpoint.pt`` (with more
+``dagger.rounds``, a finished run goes on with the next round). Any key of
 ``agents.training.bc.BCConfig`` (``section.key`` for ``model.*`` and ``dagger.*``) can be
 overridden; an unknown key is an error.
 """
