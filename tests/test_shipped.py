@@ -49,3 +49,23 @@ def test_golden_rewards_of_the_shipped_model(task: str, centralized: bool) -> No
     env = marl_cover.parallel_env(hops=model.config.hops, task=task)
     summary = evaluate(env, GNNPolicy(model.double(), centralized=centralized), range(5))
     assert [r.reward for r in summary.results] == GOLDEN_CITY[task]
+
+
+def test_the_dagger_model_ships_with_its_card_and_golden_rewards() -> None:
+    """``dagger/coverage_gnn.pt``: the best model on the paper's windows, beside the default."""
+    path = SHIPPED / "dagger" / "coverage_gnn.pt"
+    model, metadata = load_model(path)
+    card = json.loads(path.with_suffix(".json").read_text())
+    assert card["config"]["init"] == "agents/models/shipped/bc/coverage_gnn.pt"
+    start, _ = load_model(SHIPPED.parents[2] / card["config"]["init"])
+    assert start.config == model.config
+    dagger = card["config"]["dagger"]
+    assert (dagger["expert_mode"], dagger["expert_horizon"], dagger["expert_clock"]) == (
+        "receding",
+        19,
+        False,
+    )
+    assert metadata["step"] == 7000 and metadata["dataset"].endswith("coverage_expert")
+    env = marl_cover.parallel_env(hops=model.config.hops)
+    summary = evaluate(env, GNNPolicy(model.double()), range(5))
+    assert [r.reward for r in summary.results] == [86.0, 97.0, 86.0, 91.0, 88.0]
