@@ -315,6 +315,12 @@ def dagger_round(
     return episodes
 
 
+def _sensor_range(env: CoverageEnv) -> float | None:
+    """The range sensor of an exploration env (transitions rebuild what the team discovered),
+    ``None`` in coverage."""
+    return env.config.sensor_range if env.config.task == "exploration" else None
+
+
 # ---------------------------------------------------------------------------- checkpoints
 def _phase(step: int, config: BCConfig) -> tuple[int, int]:
     """(phase, step within the phase): phase 0 is BC, phase k the training after round k."""
@@ -360,16 +366,13 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
     dagger_episodes = [read_shard(path) for path in dagger_shards if path.exists()]
     table = GraphTable([e.graph for e in train + val], max_nodes)
     # exploration: transitions carry what the team had discovered (same sensor as the env)
-    sensor = env.config.sensor_range if env.config.task == "exploration" else None
+    sensor = _sensor_range(env)
     val_data = episode_transitions(val, max_nodes, first_index=len(train), sensor_range=sensor)
     select_env = CoverageEnv(**{**config.env, **config.select_env}) if config.select_env else env
     # dagger.env: roll-outs on another map or team, their states collated apart
     apart = bool(config.dagger.env)
     rollout_env = CoverageEnv(**{**config.env, **config.dagger.env}) if apart else env
-    rollout_steps = rollout_env.config.max_steps
-    rollout_sensor = (
-        rollout_env.config.sensor_range if rollout_env.config.task == "exploration" else None
-    )
+    rollout_steps, rollout_sensor = rollout_env.config.max_steps, _sensor_range(rollout_env)
     own_table: GraphTable | None = None
     dagger_capacity = config.dagger.rounds * config.dagger.episodes * rollout_steps
     # with dagger.fraction the DAgger states have a buffer of their own, drawn from at that rate
@@ -382,13 +385,11 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
     def add_dagger(episodes: list[Episode]) -> None:
         nonlocal table, own_table
         graphs = [e.graph for e in episodes]
-        if apart:
-            first = 0 if own_table is None else len(own_table)
+        if apart:  # the roll-out env's graphs, padded to its largest map
             if own_table is None:
-                largest = max(g.num_nodes for g in graphs)
-                own_table = GraphTable(graphs, max(rollout_env.max_waypoints, largest))
+                first, own_table = 0, GraphTable(graphs, rollout_env.max_waypoints)
             else:
-                own_table = own_table.extended(graphs)
+                first, own_table = len(own_table), own_table.extended(graphs)
             own.extend(
                 episode_transitions(
                     episodes, own_table.max_nodes, first_index=first, sensor_range=rollout_sensor
