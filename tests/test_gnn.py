@@ -167,6 +167,33 @@ def test_per_hop_blocks_have_their_own_weights() -> None:
         GNNConfig(kind="linear", per_hop=True)
 
 
+def test_per_hop_copy_keeps_the_logits_and_frees_the_hops() -> None:
+    torch.manual_seed(3)
+    shared = AggregationGNN(GNNConfig(hops=4, hidden=8)).double()
+    copy = shared.per_hop_copy()
+    assert copy.config == GNNConfig(hops=4, hidden=8, per_hop=True)
+    assert len(copy.edge_blocks) == 4 and len(copy.node_blocks) == 3
+    env = marl_cover.parallel_env(num_robots=3, hops=4, city_size=90)
+    env.reset(seed=5)
+    state = {k: torch.as_tensor(v) for k, v in env.state().items()}
+    keep = state["edge_mask"]
+    graph = (
+        state["nodes"].double(),
+        state["edge_index"][:, keep],
+        state["edge_attr"][keep].double(),
+    )
+    torch.testing.assert_close(copy(*graph), shared(*graph), atol=0, rtol=0)
+    # the copies are separate tensors: a change to one hop leaves the others and the source
+    with torch.no_grad():
+        copy.edge_blocks[1][0].weight.add_(1.0)
+    torch.testing.assert_close(copy.edge_blocks[2][0].weight, shared.edge_block[0].weight)
+    assert not torch.equal(copy(*graph), shared(*graph))
+    with pytest.raises(ValueError, match="non-linear shared-block model"):
+        copy.per_hop_copy()
+    with pytest.raises(ValueError, match="non-linear shared-block model"):
+        AggregationGNN(GNNConfig(kind="linear", hops=2)).per_hop_copy()
+
+
 @pytest.mark.parametrize(
     "config",
     [

@@ -25,7 +25,7 @@ tests that check the fast path against it.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import torch
 from torch import nn
@@ -165,6 +165,35 @@ class AggregationGNN(nn.Module):
         self.readout = nn.Linear((config.hops + 1) * h, 1)
         nn.init.orthogonal_(self.readout.weight)
         nn.init.zeros_(self.readout.bias)
+
+    def per_hop_copy(self) -> AggregationGNN:
+        """The same function as a model with a block of its own for each hop.
+
+        Every hop's edge and node MLP starts as a copy of this model's shared block (the last
+        hop has no node MLP), so the copy's logits equal this model's; training can then let
+        the hops differ. A way to grow a trained shared-block model without starting over.
+
+        Raises:
+            ValueError: this is not a non-linear model with a shared block.
+        """
+        if self.config.kind != "nonlinear" or self.config.per_hop:
+            raise ValueError(
+                f"per_hop_copy needs a non-linear shared-block model, got {self.config}"
+            )
+        parameter = self.readout.weight
+        copy = AggregationGNN(replace(self.config, per_hop=True))
+        copy = copy.to(device=parameter.device, dtype=parameter.dtype)
+        state = {
+            key: value
+            for key, value in self.state_dict().items()
+            if not key.startswith(("edge_block.", "node_block."))
+        }
+        for name, blocks in (("edge", copy.edge_blocks), ("node", copy.node_blocks)):
+            shared = getattr(self, f"{name}_block").state_dict()
+            for hop in range(len(blocks)):
+                state.update({f"{name}_blocks.{hop}.{k}": v.clone() for k, v in shared.items()})
+        copy.load_state_dict(state)
+        return copy.train(self.training)
 
     def blocks(self, hop: int) -> tuple[nn.Sequential, nn.Sequential | None]:
         """The non-linear model's edge and node MLPs at ``hop`` (no node MLP after the last hop

@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -120,7 +120,9 @@ class BCConfig:
     dataset: str = "data/coverage_expert"
     out: str = "outputs/bc/run"
     model: GNNConfig = field(default_factory=GNNConfig)
-    init: str | None = None  # start from this model file (its config must equal ``model``)
+    # start from this model file: its config must equal ``model``, or be ``model`` with one
+    # shared block where ``model.per_hop`` is set (every hop then starts from that block)
+    init: str | None = None
     env: dict[str, Any] = field(default_factory=lambda: {"map": "paper"})
     batch_size: int = 32
     lr: float = 1e-3
@@ -414,6 +416,8 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
     model = AggregationGNN(config.model)
     if config.init is not None:
         start, _ = load_model(config.init)
+        if config.model.per_hop and start.config == replace(config.model, per_hop=False):
+            start = start.per_hop_copy()  # every hop starts from the shared block
         if start.config != config.model:
             raise ValueError(f"init {config.init} is a {start.config}, not model {config.model}")
         model.load_state_dict(start.state_dict())
