@@ -69,3 +69,18 @@ def test_the_dagger_model_ships_with_its_card_and_golden_rewards() -> None:
     env = marl_cover.parallel_env(hops=model.config.hops)
     summary = evaluate(env, GNNPolicy(model.double()), range(5))
     assert [r.reward for r in summary.results] == [86.0, 97.0, 86.0, 91.0, 88.0]
+
+
+def test_the_per_hop_dagger_model_grows_from_the_dagger_model() -> None:
+    """``dagger_per_hop/coverage_gnn.pt``: a block per hop, started from ``dagger/``'s block."""
+    path = SHIPPED / "dagger_per_hop" / "coverage_gnn.pt"
+    model, metadata = load_model(path)
+    card = json.loads(path.with_suffix(".json").read_text())
+    assert model.config.per_hop and card["config"]["model"]["per_hop"]
+    assert card["config"]["init"] == "agents/models/shipped/dagger/coverage_gnn.pt"
+    start, _ = load_model(SHIPPED.parents[2] / card["config"]["init"])
+    assert start.per_hop_copy().config == model.config
+    assert metadata["step"] == 4000 and metadata["dataset"].endswith("coverage_expert")
+    env = marl_cover.parallel_env(hops=model.config.hops)
+    summary = evaluate(env, GNNPolicy(model.double()), range(5))
+    assert [r.reward for r in summary.results] == [90.0, 96.0, 86.0, 89.0, 79.0]
