@@ -5,10 +5,11 @@ actions, on one CPU thread (or ``--device cuda``), for the linear and non-linear
 K. Rows: 4 robots on windows of the paper's map, each robot on its own ego-graph
 (decentralized) and all robots in one pass over ``state()`` (centralized); and 100 robots on
 the 5659-waypoint map, centralized, at K = 19. Weights are random: the time does not depend on
-them.
+them. ``--checkpoints`` adds rows for model files (their own shape: width, a block per hop) at
+their K.
 
     python scripts/bench_gnn.py [--hops 3 5 ... 19] [--steps 100] [--device cpu]
-        [--out outputs/bench_gnn.json]
+        [--checkpoints FILE ...] [--out outputs/bench_gnn.json]
 """
 
 from __future__ import annotations
@@ -27,7 +28,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from agents.cli import positive_int, write_text_atomic  # noqa: E402
 from agents.models import AggregationGNN, GNNConfig  # noqa: E402
-from agents.models.gnn import centralized_logits, decentralized_logits  # noqa: E402
+from agents.models.gnn import KINDS, centralized_logits, decentralized_logits  # noqa: E402
+from agents.models.policy import load_model  # noqa: E402
 from marl_cover import parallel_env  # noqa: E402
 
 #: The paper's controller time per step (ms per 50-step episode / 50; GNNs on a GTX 1080).
@@ -92,6 +94,7 @@ def main() -> None:
     parser.add_argument("--steps", type=positive_int, default=100)
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--threads", type=positive_int, default=1)
+    parser.add_argument("--checkpoints", nargs="*", type=Path, default=[])
     parser.add_argument("--out", type=Path, default=Path("outputs/bench_gnn.json"))
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
@@ -101,15 +104,18 @@ def main() -> None:
         f"{'model':<10} {'K':>3} {'robots':>6} {'map':<12} {'one robot':>10} {'decentral':>10} "
         f"{'central':>9} {'paper':>7}"
     )
+    files = [(path, load_model(path)[0]) for path in args.checkpoints]
     cases = [(hops, 4, "paper") for hops in args.hops] + [(19, 100, "paper_large")]
     for hops, robots, map_name in cases:
         pairs = record_states(
             {"map": map_name, "hops": hops, "num_robots": robots},
             args.steps if robots == 4 else max(10, args.steps // 5),
         )
-        for kind in ("linear", "nonlinear"):
-            torch.manual_seed(0)
-            model = AggregationGNN(GNNConfig(kind=kind, hops=hops)).to(args.device).eval()
+        torch.manual_seed(0)
+        models = [(kind, AggregationGNN(GNNConfig(kind=kind, hops=hops))) for kind in KINDS]
+        models += [(str(path), model) for path, model in files if model.config.hops == hops]
+        for kind, model in models:
+            model = model.to(args.device).eval()
             small = robots <= 4
             one = time_policy(model, pairs, "one_robot", args.device) if small else float("nan")
             decentral = (
@@ -120,6 +126,8 @@ def main() -> None:
             rows.append(
                 {
                     "kind": kind,
+                    "hidden": model.config.hidden,
+                    "per_hop": model.config.per_hop,
                     "hops": hops,
                     "robots": robots,
                     "map": map_name,

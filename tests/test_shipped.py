@@ -84,3 +84,16 @@ def test_the_per_hop_dagger_model_grows_from_the_dagger_model() -> None:
     env = marl_cover.parallel_env(hops=model.config.hops)
     summary = evaluate(env, GNNPolicy(model.double()), range(5))
     assert [r.reward for r in summary.results] == [90.0, 96.0, 86.0, 89.0, 79.0]
+
+
+def test_the_linear_model_ships_with_its_card_and_golden_rewards() -> None:
+    """``linear/coverage_gnn.pt``: the best linear model (width 32, BC + DAgger)."""
+    path = SHIPPED / "linear" / "coverage_gnn.pt"
+    model, metadata = load_model(path)
+    card = json.loads(path.with_suffix(".json").read_text())
+    assert (model.config.kind, model.config.hidden, model.config.hops) == ("linear", 32, 19)
+    assert card["config"]["model"]["hidden"] == 32 and card["config"]["dagger"]["rounds"] == 5
+    assert metadata["step"] == 10000 and metadata["dataset"].endswith("coverage_expert")
+    env = marl_cover.parallel_env(hops=model.config.hops)
+    summary = evaluate(env, GNNPolicy(model.double()), range(5))
+    assert [r.reward for r in summary.results] == [83.0, 90.0, 86.0, 92.0, 94.0]
