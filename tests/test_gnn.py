@@ -21,6 +21,21 @@ def tensors(arrays: dict[str, np.ndarray]) -> dict[str, torch.Tensor]:
     return {k: torch.as_tensor(v) for k, v in arrays.items()}
 
 
+def state_graph(
+    num_robots: int, hops: int, city_size: int, seed: int
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """``nodes, edge_index, edge_attr`` (float64, padding cut) of a city's first state."""
+    env = marl_cover.parallel_env(num_robots=num_robots, hops=hops, city_size=city_size)
+    env.reset(seed=seed)
+    state = tensors(env.state())
+    keep = state["edge_mask"]
+    return (
+        state["nodes"].double(),
+        state["edge_index"][:, keep],
+        state["edge_attr"][keep].double(),
+    )
+
+
 def random_states(hops: int, seed: int, task: str = "coverage"):
     env = marl_cover.parallel_env(num_robots=6, hops=hops, city_size=200, task=task)
     rng = np.random.default_rng(seed)
@@ -115,15 +130,7 @@ def test_padded_batches_of_partial_ego_graphs_equal_one_at_a_time(kind: str) -> 
 def test_renumbering_nodes_and_edges_changes_nothing(kind: str) -> None:
     torch.manual_seed(0)
     model = AggregationGNN(GNNConfig(kind=kind, hops=5)).double()
-    env = marl_cover.parallel_env(num_robots=4, hops=5, city_size=150)
-    env.reset(seed=4)
-    state = {k: torch.as_tensor(v) for k, v in env.state().items()}
-    keep = state["edge_mask"]
-    nodes, index, attr = (
-        state["nodes"].double(),
-        state["edge_index"][:, keep],
-        state["edge_attr"][keep].double(),
-    )
+    nodes, index, attr = state_graph(num_robots=4, hops=5, city_size=150, seed=4)
     with torch.no_grad():
         reference = model(nodes, index, attr)
         rng = np.random.default_rng(0)
@@ -173,15 +180,7 @@ def test_per_hop_copy_keeps_the_logits_and_frees_the_hops() -> None:
     copy = shared.per_hop_copy()
     assert copy.config == GNNConfig(hops=4, hidden=8, per_hop=True)
     assert len(copy.edge_blocks) == 4 and len(copy.node_blocks) == 3
-    env = marl_cover.parallel_env(num_robots=3, hops=4, city_size=90)
-    env.reset(seed=5)
-    state = {k: torch.as_tensor(v) for k, v in env.state().items()}
-    keep = state["edge_mask"]
-    graph = (
-        state["nodes"].double(),
-        state["edge_index"][:, keep],
-        state["edge_attr"][keep].double(),
-    )
+    graph = state_graph(num_robots=3, hops=4, city_size=90, seed=5)
     torch.testing.assert_close(copy(*graph), shared(*graph), atol=0, rtol=0)
     # the copies are separate tensors: a change to one hop leaves the others and the source
     with torch.no_grad():
@@ -210,15 +209,7 @@ def test_per_hop_copy_keeps_the_logits_and_frees_the_hops() -> None:
 def test_fast_forward_and_its_gradients_equal_the_plain_formula(config: GNNConfig) -> None:
     torch.manual_seed(config.hops)
     model = AggregationGNN(config).double()
-    env = marl_cover.parallel_env(num_robots=3, hops=config.hops, city_size=90)
-    env.reset(seed=2)
-    state = {k: torch.as_tensor(v) for k, v in env.state().items()}
-    keep = state["edge_mask"]
-    graph = (
-        state["nodes"].double(),
-        state["edge_index"][:, keep],
-        state["edge_attr"][keep].double(),
-    )
+    graph = state_graph(num_robots=3, hops=config.hops, city_size=90, seed=2)
     some_edges = torch.tensor([0, 3, 7, 11, 5, 0])
     fast = model(*graph, out_edges=some_edges)
     reference = model.reference_forward(*graph)

@@ -11,6 +11,7 @@ import marl_cover
 torch = pytest.importorskip("torch")
 
 from agents.evaluation import evaluate  # noqa: E402
+from agents.models import AggregationGNN  # noqa: E402
 from agents.models.policy import GNNPolicy, load_model  # noqa: E402
 from agents.models.shipped import SHIPPED, shipped_model_path  # noqa: E402
 
@@ -19,6 +20,19 @@ GOLDEN_CITY = {
     "coverage": [80.0, 86.0, 88.0, 96.0, 81.0],
     "exploration": [72.0, 89.0, 88.0, 94.0, 92.0],
 }
+
+
+def shipped_beside(folder: str) -> tuple[AggregationGNN, dict, dict]:
+    """The model, its metadata and its card in ``shipped/<folder>/coverage_gnn.*``."""
+    path = SHIPPED / folder / "coverage_gnn.pt"
+    model, metadata = load_model(path)
+    return model, metadata, json.loads(path.with_suffix(".json").read_text())
+
+
+def city_rewards(model: AggregationGNN) -> list[float]:
+    """Rewards of ``model`` (float64, argmax, ego-graphs) on procedural cities, seeds 0..4."""
+    env = marl_cover.parallel_env(hops=model.config.hops)
+    return [r.reward for r in evaluate(env, GNNPolicy(model.double()), range(5)).results]
 
 
 @pytest.mark.parametrize("task", list(GOLDEN_CITY))
@@ -53,9 +67,7 @@ def test_golden_rewards_of_the_shipped_model(task: str, centralized: bool) -> No
 
 def test_the_dagger_model_ships_with_its_card_and_golden_rewards() -> None:
     """``dagger/coverage_gnn.pt``: the best model on the paper's windows, beside the default."""
-    path = SHIPPED / "dagger" / "coverage_gnn.pt"
-    model, metadata = load_model(path)
-    card = json.loads(path.with_suffix(".json").read_text())
+    model, metadata, card = shipped_beside("dagger")
     assert card["config"]["init"] == "agents/models/shipped/bc/coverage_gnn.pt"
     start, _ = load_model(SHIPPED.parents[2] / card["config"]["init"])
     assert start.config == model.config
@@ -66,34 +78,24 @@ def test_the_dagger_model_ships_with_its_card_and_golden_rewards() -> None:
         False,
     )
     assert metadata["step"] == 7000 and metadata["dataset"].endswith("coverage_expert")
-    env = marl_cover.parallel_env(hops=model.config.hops)
-    summary = evaluate(env, GNNPolicy(model.double()), range(5))
-    assert [r.reward for r in summary.results] == [86.0, 97.0, 86.0, 91.0, 88.0]
+    assert city_rewards(model) == [86.0, 97.0, 86.0, 91.0, 88.0]
 
 
 def test_the_per_hop_dagger_model_grows_from_the_dagger_model() -> None:
     """``dagger_per_hop/coverage_gnn.pt``: a block per hop, started from ``dagger/``'s block."""
-    path = SHIPPED / "dagger_per_hop" / "coverage_gnn.pt"
-    model, metadata = load_model(path)
-    card = json.loads(path.with_suffix(".json").read_text())
+    model, metadata, card = shipped_beside("dagger_per_hop")
     assert model.config.per_hop and card["config"]["model"]["per_hop"]
     assert card["config"]["init"] == "agents/models/shipped/dagger/coverage_gnn.pt"
     start, _ = load_model(SHIPPED.parents[2] / card["config"]["init"])
     assert start.per_hop_copy().config == model.config
     assert metadata["step"] == 4000 and metadata["dataset"].endswith("coverage_expert")
-    env = marl_cover.parallel_env(hops=model.config.hops)
-    summary = evaluate(env, GNNPolicy(model.double()), range(5))
-    assert [r.reward for r in summary.results] == [90.0, 96.0, 86.0, 89.0, 79.0]
+    assert city_rewards(model) == [90.0, 96.0, 86.0, 89.0, 79.0]
 
 
 def test_the_linear_model_ships_with_its_card_and_golden_rewards() -> None:
     """``linear/coverage_gnn.pt``: the best linear model (width 32, BC + DAgger)."""
-    path = SHIPPED / "linear" / "coverage_gnn.pt"
-    model, metadata = load_model(path)
-    card = json.loads(path.with_suffix(".json").read_text())
+    model, metadata, card = shipped_beside("linear")
     assert (model.config.kind, model.config.hidden, model.config.hops) == ("linear", 32, 19)
     assert card["config"]["model"]["hidden"] == 32 and card["config"]["dagger"]["rounds"] == 5
     assert metadata["step"] == 10000 and metadata["dataset"].endswith("coverage_expert")
-    env = marl_cover.parallel_env(hops=model.config.hops)
-    summary = evaluate(env, GNNPolicy(model.double()), range(5))
-    assert [r.reward for r in summary.results] == [83.0, 90.0, 86.0, 92.0, 94.0]
+    assert city_rewards(model) == [83.0, 90.0, 86.0, 92.0, 94.0]

@@ -183,16 +183,12 @@ class AggregationGNN(nn.Module):
         parameter = self.readout.weight
         copy = AggregationGNN(replace(self.config, per_hop=True))
         copy = copy.to(device=parameter.device, dtype=parameter.dtype)
-        state = {
-            key: value
-            for key, value in self.state_dict().items()
-            if not key.startswith(("edge_block.", "node_block."))
-        }
-        for name, blocks in (("edge", copy.edge_blocks), ("node", copy.node_blocks)):
-            shared = getattr(self, f"{name}_block").state_dict()
-            for hop in range(len(blocks)):
-                state.update({f"{name}_blocks.{hop}.{k}": v.clone() for k, v in shared.items()})
-        copy.load_state_dict(state)
+        # encoders, decoder and readout by name (the shared blocks have no namesake there)
+        copy.load_state_dict(self.state_dict(), strict=False)
+        for block in copy.edge_blocks:
+            block.load_state_dict(self.edge_block.state_dict())
+        for block in copy.node_blocks:
+            block.load_state_dict(self.node_block.state_dict())
         return copy.train(self.training)
 
     def blocks(self, hop: int) -> tuple[nn.Sequential, nn.Sequential | None]:
