@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -191,6 +193,58 @@ def test_per_hop_copy_keeps_the_logits_and_frees_the_hops() -> None:
         copy.per_hop_copy()
     with pytest.raises(ValueError, match="non-linear shared-block model"):
         AggregationGNN(GNNConfig(kind="linear", hops=2)).per_hop_copy()
+
+
+@pytest.mark.parametrize(
+    "config",
+    [
+        GNNConfig(kind="linear", hops=4, hidden=8),
+        GNNConfig(kind="nonlinear", hops=4, hidden=8),
+        GNNConfig(kind="nonlinear", hops=3, hidden=8, residual=True),
+        GNNConfig(kind="nonlinear", hops=4, hidden=8, per_hop=True, time_horizon=50),
+    ],
+    ids=str,
+)
+def test_wider_copy_keeps_the_logits_and_trains_the_new_units(config) -> None:
+    torch.manual_seed(4)
+    narrow = AggregationGNN(config).double()
+    wide = narrow.wider_copy(13)
+    assert wide.config == replace(config, hidden=13)
+    nodes, edge_index, edge_attr = state_graph(num_robots=3, hops=4, city_size=90, seed=5)
+    if config.time_horizon is not None:
+        nodes = torch.cat([nodes, torch.full_like(nodes[:, :1], 0.5)], dim=1)
+    graph = (nodes, edge_index, edge_attr)
+    torch.testing.assert_close(wide(*graph), narrow(*graph), atol=1e-12, rtol=0)
+    torch.testing.assert_close(wide.reference_forward(*graph), narrow(*graph), atol=1e-12, rtol=0)
+    # the old units read no new unit, yet those zero weights get gradients
+    assert torch.all(wide.readout.weight[0].view(config.hops + 1, 13)[:, 8:] == 0)
+    wide(*graph).square().sum().backward()
+    assert wide.readout.weight.grad[0].view(config.hops + 1, 13)[:, 8:].abs().sum() > 0
+    assert wide.edge_decoder[0].weight.grad[:8, 8:].abs().sum() > 0
+    # the same seed gives the same new units
+    again = narrow.wider_copy(13)
+    for a, b in zip(wide.parameters(), again.parameters(), strict=True):
+        assert torch.equal(a, b)
+    with pytest.raises(ValueError, match="hidden > 8"):
+        narrow.wider_copy(8)
+
+
+def test_grown_to_widens_and_splits_the_hops_or_says_why_not() -> None:
+    torch.manual_seed(5)
+    shared = AggregationGNN(GNNConfig(hops=3, hidden=8)).double()
+    target = GNNConfig(hops=3, hidden=10, per_hop=True)
+    grown = shared.grown_to(target)
+    assert grown.config == target
+    graph = state_graph(num_robots=2, hops=3, city_size=90, seed=6)
+    torch.testing.assert_close(grown(*graph), shared(*graph), atol=1e-12, rtol=0)
+    assert shared.grown_to(shared.config) is shared
+    for other in (
+        GNNConfig(hops=4, hidden=8),
+        GNNConfig(hops=3, hidden=4),
+        GNNConfig(kind="linear", hops=3, hidden=8),
+    ):
+        with pytest.raises(ValueError, match="cannot grow into"):
+            shared.grown_to(other)
 
 
 @pytest.mark.parametrize(

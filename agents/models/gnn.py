@@ -191,6 +191,56 @@ class AggregationGNN(nn.Module):
             block.load_state_dict(self.node_block.state_dict())
         return copy.train(self.training)
 
+    def wider_copy(self, hidden: int, seed: int = 0) -> AggregationGNN:
+        """The same function as a model with ``hidden`` units in every MLP and latent.
+
+        The new units get a fresh initialisation (from ``seed``) and every weight from a new
+        unit into an old one is zero, so the old units compute what they did and the logits are
+        unchanged; the zero weights get gradients (the new units are active), so training can
+        put the new width to use. A way to grow a trained model without starting over.
+
+        Raises:
+            ValueError: ``hidden`` is not larger than this model's width.
+        """
+        old_width = self.config.hidden
+        if hidden <= old_width:
+            raise ValueError(f"wider_copy needs hidden > {old_width}, got {hidden}")
+        parameter = self.readout.weight
+        with torch.random.fork_rng(devices=[]):
+            torch.manual_seed(seed)
+            copy = AggregationGNN(replace(self.config, hidden=hidden))
+        copy = copy.to(device=parameter.device, dtype=parameter.dtype)
+        old_layers = dict(self.named_modules())
+        with torch.no_grad():
+            for name, layer in copy.named_modules():
+                if not isinstance(layer, nn.Linear):
+                    continue
+                old = old_layers[name]
+                rows = _widened_indices(old.out_features, layer.out_features, old_width)
+                columns = _widened_indices(old.in_features, layer.in_features, old_width)
+                # old units read old units only; new units read everything
+                layer.weight[rows] = 0.0
+                layer.weight[rows.unsqueeze(1), columns] = old.weight
+                layer.bias[rows] = old.bias
+        return copy.train(self.training)
+
+    def grown_to(self, config: GNNConfig, seed: int = 0) -> AggregationGNN:
+        """This model grown to ``config`` with the same logits: a block per hop
+        (:meth:`per_hop_copy`) and more width (:meth:`wider_copy`) as ``config`` asks; itself
+        when ``config`` is its own.
+
+        Raises:
+            ValueError: ``config`` differs in anything else, or asks for less.
+        """
+        grown = self
+        if config.per_hop and not self.config.per_hop and self.config.kind == "nonlinear":
+            grown = grown.per_hop_copy()
+        if config.hidden > self.config.hidden:
+            grown = grown.wider_copy(config.hidden, seed=seed)
+        if grown.config != config:
+            raise ValueError(f"a {self.config} cannot grow into a {config}")
+        return grown
+
     def blocks(self, hop: int) -> tuple[nn.Sequential, nn.Sequential | None]:
         """The non-linear model's edge and node MLPs at ``hop`` (no node MLP after the last hop
         with ``per_hop``)."""
@@ -317,6 +367,18 @@ class AggregationGNN(nn.Module):
                     h = h_new + h if self.config.residual else h_new
             stages.append(self.edge_decoder(e))
         return self.readout(torch.cat(stages, dim=1)).squeeze(1)
+
+
+def _widened_indices(size: int, new_size: int, old_width: int) -> torch.Tensor:
+    """Where the ``size`` entries of one side of a linear layer go in its widened copy
+    (``new_size`` entries): a side that kept its size (raw features, the readout's logit) maps
+    to itself; a concatenation of latents ``old_width`` wide keeps each latent's entries at the
+    start of its widened segment."""
+    index = torch.arange(size)
+    if new_size == size:
+        return index
+    width = new_size // (size // old_width)
+    return index // old_width * width + index % old_width
 
 
 def flatten_padded(

@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -121,7 +121,8 @@ class BCConfig:
     out: str = "outputs/bc/run"
     model: GNNConfig = field(default_factory=GNNConfig)
     # start from this model file: its config must equal ``model``, or be ``model`` with one
-    # shared block where ``model.per_hop`` is set (every hop then starts from that block)
+    # shared block where ``model.per_hop`` is set and/or a smaller ``hidden`` (the model then
+    # grows from it with the same logits: AggregationGNN.grown_to)
     init: str | None = None
     env: dict[str, Any] = field(default_factory=lambda: {"map": "paper"})
     batch_size: int = 32
@@ -416,10 +417,13 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
     model = AggregationGNN(config.model)
     if config.init is not None:
         start, _ = load_model(config.init)
-        if config.model.per_hop and start.config == replace(config.model, per_hop=False):
-            start = start.per_hop_copy()  # every hop starts from the shared block
-        if start.config != config.model:
-            raise ValueError(f"init {config.init} is a {start.config}, not model {config.model}")
+        try:  # a block per hop or more width start from the init model's function
+            start = start.grown_to(config.model, seed=config.seed)
+        except ValueError:
+            raise ValueError(
+                f"init {config.init} is a {start.config}, not model {config.model} "
+                "(nor one that can grow into it)"
+            ) from None
         model.load_state_dict(start.state_dict())
     optimizer = torch.optim.Adam(model.parameters(), lr=config.lr)
     step, best_reward = 0, -math.inf
