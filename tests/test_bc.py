@@ -258,6 +258,13 @@ def test_behaviour_cloning_lowers_the_loss_and_resumes_exactly(tmp_path) -> None
     assert (tmp_path / "whole" / "log" / "scalars" / "val_cross_entropy.csv").exists()
     for name in ("best.pt", "model.pt", "checkpoint.pt", "config.yaml", "summary.json"):
         assert (tmp_path / "whole" / name).exists()
+    snapshots = sorted(p.name for p in (tmp_path / "whole" / "steps").iterdir())
+    assert snapshots == ["step_000060.pt", "step_000120.pt"]  # one per validation
+    last, info = load_model(tmp_path / "whole" / "steps" / "step_000120.pt")
+    final, _ = load_model(tmp_path / "whole" / "model.pt")
+    assert info["step"] == 120 and info["val_cross_entropy"] == summary["val_cross_entropy"]
+    for a, b in zip(last.state_dict().values(), final.state_dict().values(), strict=True):
+        assert torch.equal(a, b)
 
     # interrupted at step 60, then resumed to 120: the same weights as one run
     train_bc(small_config(tmp_path, "parts", steps=60))

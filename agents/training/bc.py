@@ -13,8 +13,9 @@ episode is used instead of the first 200):
    lr_decay_every)``.
 4. Every ``val_every`` steps: validation cross-entropy and accuracy, the mean reward of the
    greedy (argmax) policy on ``select_episodes`` selection episodes (seeds from
-   ``select_seed``, disjoint from the dataset and the test seeds), a resumable checkpoint, and
-   ``best.pt`` when the selection reward improves.
+   ``select_seed``, disjoint from the dataset and the test seeds), a resumable checkpoint,
+   ``best.pt`` when the selection reward improves, and (``snapshots``) the model as
+   ``steps/step_NNNNNN.pt``, so that a longer evaluation can choose among them afterwards.
 5. DAgger (``dagger.rounds > 0``; ``init`` and ``steps=0`` run it from an earlier model):
    play the current policy (executing the expert's action with probability ``beta``,
    decaying per round), label every visited state with the expert re-planned from that state
@@ -138,6 +139,9 @@ class BCConfig:
     select_episodes: int = 20
     select_seed: int = 10_000
     select_env: dict[str, Any] = field(default_factory=dict)  # overrides of env for selection
+    # keep the model of every validation step as out/steps/step_NNNNNN.pt (selection on a few
+    # episodes is noisy; these let a longer evaluation choose afterwards)
+    snapshots: bool = True
     seed: int = 0
     threads: int = 1
     logger: str = "csv"
@@ -353,7 +357,7 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
     check_same_run(
         config_path,
         record,
-        ignored=("progress", "out", "steps", "dagger.rounds"),
+        ignored=("progress", "out", "steps", "snapshots", "dagger.rounds"),
         defaults=configuration.as_dict(BCConfig()),
     )
     write_text_atomic(config_path, yaml.safe_dump(record, sort_keys=False))
@@ -483,6 +487,9 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
         if step % config.val_every == 0 or step == config.total_steps:
             scores = validate(model, val_data, table, max_steps=env.config.max_steps)
             scores["select_reward"] = selection_reward(model, select_env, config)
+            if config.snapshots:
+                snapshot = out / "steps" / f"step_{step:06d}.pt"
+                save_model(snapshot, model, {**metadata, "step": step, **scores})
             if scores["select_reward"] > best_reward:
                 best_reward = scores["select_reward"]
                 save_model(out / "best.pt", model, {**metadata, "step": step, **scores})
