@@ -10,6 +10,7 @@ import marl_cover
 
 torch = pytest.importorskip("torch")
 
+from agents.cli import file_sha256  # noqa: E402
 from agents.evaluation import evaluate  # noqa: E402
 from agents.models import AggregationGNN  # noqa: E402
 from agents.models.policy import GNNPolicy, load_model  # noqa: E402
@@ -18,7 +19,7 @@ from agents.models.shipped import SHIPPED, shipped_model_path  # noqa: E402
 #: Rewards of each shipped model (float64, argmax) on procedural cities, seeds 0..4, 4 robots.
 GOLDEN_CITY = {
     "coverage": [80.0, 86.0, 88.0, 96.0, 81.0],
-    "exploration": [72.0, 89.0, 88.0, 94.0, 92.0],
+    "exploration": [80.0, 86.0, 72.0, 92.0, 92.0],
 }
 
 
@@ -90,6 +91,20 @@ def test_the_per_hop_dagger_model_grows_from_the_dagger_model() -> None:
     assert start.per_hop_copy().config == model.config
     assert metadata["step"] == 14000 and metadata["dataset"].endswith("coverage_expert")
     assert city_rewards(model) == [87.0, 91.0, 85.0, 94.0, 78.0]
+
+
+def test_the_exploration_model_grows_from_the_per_hop_coverage_model() -> None:
+    """``exploration_gnn.pt``: the per-hop coverage model trained on its own exploration states;
+    the MAPPO fine-tune it replaced ships beside it in ``mappo/`` with its card."""
+    model, metadata = load_model(shipped_model_path("exploration"))
+    card = json.loads((SHIPPED / "exploration_gnn.json").read_text())
+    assert model.config.per_hop and card["config"]["env"]["task"] == "exploration"
+    assert card["config"]["init"] == "agents/models/shipped/dagger_per_hop/coverage_gnn.pt"
+    assert card["init_sha256"] == file_sha256(SHIPPED / "dagger_per_hop" / "coverage_gnn.pt")
+    assert metadata["step"] == 8000 and metadata["dataset"].endswith("coverage_expert")
+    previous, previous_metadata = load_model(SHIPPED / "mappo" / "exploration_gnn.pt")
+    assert not previous.config.per_hop and previous_metadata["init"]["dataset"]
+    assert "mappo" in json.loads((SHIPPED / "mappo" / "exploration_gnn.json").read_text())["model"]
 
 
 def test_the_linear_model_ships_with_its_card_and_golden_rewards() -> None:
