@@ -257,6 +257,8 @@ def test_grown_to_widens_and_splits_the_hops_or_says_why_not() -> None:
         GNNConfig(kind="nonlinear", hops=4, residual=True, hidden=8),
         GNNConfig(kind="nonlinear", hops=5, per_hop=True, hidden=8),
         GNNConfig(kind="nonlinear", hops=1, per_hop=True),
+        GNNConfig(kind="nonlinear", hops=19, hidden=8),
+        GNNConfig(kind="nonlinear", hops=12, per_hop=True, residual=True, hidden=4),
     ],
     ids=str,
 )
@@ -284,3 +286,42 @@ def test_fast_forward_and_its_gradients_equal_the_plain_formula(config: GNNConfi
             atol=1e-9,
             rtol=0,
         )
+
+
+def test_the_receptive_field_of_an_output_edge_on_a_path() -> None:
+    from agents.models.gnn import receptive_field
+
+    # 0 - 1 - 2 - 3 - 4 - 5, both ways; the output is edge 1 (1 -> 0)
+    pairs = [(0, 1), (1, 0), (1, 2), (2, 1), (2, 3), (3, 2), (3, 4), (4, 3), (4, 5), (5, 4)]
+    edge_index = torch.tensor(pairs).t()
+    field = receptive_field(edge_index, torch.tensor([1]), hops=3, num_nodes=6)
+    # distances 0, 0, 1, 2, 3, 3 (capped at hops): block 0 updates the nodes within 1 hop,
+    # reading senders within 2; nodes 4 and 5 are never read
+    assert field.node_order.tolist() == [0, 1, 2, 3]
+    assert field.node_counts == [2, 3, 4, 6]
+    # edges into nodes 0 and 1 (receiver distance 0), then into node 2 (distance 1)
+    assert field.edge_order.tolist() == [0, 1, 3, 2, 5]
+    assert field.edge_counts == [3, 5, 7, 10]
+    assert field.edge_index.tolist() == [[0, 1, 2, 1, 3], [1, 0, 1, 2, 2]]
+    assert field.out_positions.tolist() == [1]
+
+
+def test_weights_changed_in_place_reach_the_next_forward_without_gradients() -> None:
+    torch.manual_seed(0)
+    model = AggregationGNN(GNNConfig(hops=3, per_hop=True, hidden=8)).double()
+    other = AggregationGNN(GNNConfig(hops=3, per_hop=True, hidden=8)).double()
+    graph = state_graph(num_robots=2, hops=3, city_size=60, seed=1)
+    edges = torch.tensor([0, 1, 2, 3, 4])
+    with torch.inference_mode():
+        before = model(*graph, out_edges=edges)
+        model.edge_blocks[1][0].weight.add_(0.5)  # the split first layer is cached
+        changed = model(*graph, out_edges=edges)
+        model.load_state_dict(other.state_dict())
+        loaded = model(*graph, out_edges=edges)
+    with torch.no_grad():
+        assert not torch.allclose(before, changed)
+        model.edge_blocks[1][0].weight.sub_(0.5)
+        torch.testing.assert_close(
+            model(*graph, out_edges=edges), model.reference_forward(*graph)[edges]
+        )
+    torch.testing.assert_close(loaded, other.reference_forward(*graph)[edges])
