@@ -259,6 +259,8 @@ def test_grown_to_widens_and_splits_the_hops_or_says_why_not() -> None:
         GNNConfig(kind="nonlinear", hops=1, per_hop=True),
         GNNConfig(kind="nonlinear", hops=19, hidden=8),
         GNNConfig(kind="nonlinear", hops=12, per_hop=True, residual=True, hidden=4),
+        GNNConfig(kind="nonlinear", hops=4, norm=True, hidden=8),
+        GNNConfig(kind="nonlinear", hops=5, per_hop=True, norm=True, residual=True, hidden=8),
     ],
     ids=str,
 )
@@ -325,3 +327,24 @@ def test_weights_changed_in_place_reach_the_next_forward_without_gradients() -> 
             model(*graph, out_edges=edges), model.reference_forward(*graph)[edges]
         )
     torch.testing.assert_close(loaded, other.reference_forward(*graph)[edges])
+
+
+def test_layer_norms_per_block_grow_per_hop_and_refuse_to_widen() -> None:
+    torch.manual_seed(4)
+    shared = AggregationGNN(GNNConfig(hops=4, hidden=8, norm=True)).double()
+    with torch.no_grad():  # not the identity, so that the copy has something to keep
+        for norm in (*shared.edge_norms, *shared.node_norms):
+            norm.weight.uniform_(0.5, 1.5)
+            norm.bias.uniform_(-0.5, 0.5)
+    assert len(shared.edge_norms) == len(shared.node_norms) == 1
+    copy = shared.per_hop_copy()
+    assert len(copy.edge_norms) == 4 and len(copy.node_norms) == 3
+    graph = state_graph(num_robots=3, hops=4, city_size=90, seed=5)
+    torch.testing.assert_close(copy(*graph), shared(*graph), atol=0, rtol=0)
+    with torch.no_grad():  # the norm acts: a changed gain changes the logits
+        copy.node_norms[0].weight.mul_(2.0)
+    assert not torch.allclose(copy(*graph), shared(*graph))
+    with pytest.raises(ValueError, match="cannot keep the function"):
+        shared.wider_copy(16)
+    with pytest.raises(ValueError, match="norm applies to the non-linear model only"):
+        GNNConfig(kind="linear", norm=True)

@@ -57,6 +57,9 @@ class GNNConfig:
             the paper).
         per_hop: Non-linear model only: a block of its own for each hop instead of one block
             applied ``hops`` times (off in the paper; ``hops`` times the block parameters).
+        norm: Non-linear model only: a layer normalisation (``nn.LayerNorm``) of each block's
+            edge and node outputs, before any residual sum and the aggregation (off in the
+            paper; one per block, so per hop with ``per_hop``).
         time_horizon: Give the network the clock: every node gets one more feature,
             ``steps_left / time_horizon`` (the actions left in the episode, which an open-loop
             expert plans for), appended by :func:`with_time_feature` from the ``steps_left`` of
@@ -71,6 +74,7 @@ class GNNConfig:
     edge_features: int = 1
     residual: bool = False
     per_hop: bool = False
+    norm: bool = False
     time_horizon: int | None = None
 
     @property
@@ -87,6 +91,8 @@ class GNNConfig:
             raise ValueError("residual applies to the non-linear model only")
         if self.per_hop and self.kind == "linear":
             raise ValueError("per_hop applies to the non-linear model only")
+        if self.norm and self.kind == "linear":
+            raise ValueError("norm applies to the non-linear model only")
         if self.time_horizon is not None and self.time_horizon < 1:
             raise ValueError(f"time_horizon must be >= 1 or None, got {self.time_horizon}")
 
@@ -269,6 +275,11 @@ class AggregationGNN(nn.Module):
         elif config.kind == "nonlinear":
             self.edge_block = mlp(3 * h, h, layers)
             self.node_block = mlp(2 * h, h, layers)
+        if config.norm:
+            num_edge = config.hops if config.per_hop else 1
+            num_node = config.hops - 1 if config.per_hop else 1
+            self.edge_norms = nn.ModuleList(nn.LayerNorm(h) for _ in range(num_edge))
+            self.node_norms = nn.ModuleList(nn.LayerNorm(h) for _ in range(num_node))
         self.readout = nn.Linear((config.hops + 1) * h, 1)
         nn.init.orthogonal_(self.readout.weight)
         nn.init.zeros_(self.readout.bias)
@@ -296,6 +307,11 @@ class AggregationGNN(nn.Module):
             block.load_state_dict(self.edge_block.state_dict())
         for block in copy.node_blocks:
             block.load_state_dict(self.node_block.state_dict())
+        if self.config.norm:
+            for norm in copy.edge_norms:
+                norm.load_state_dict(self.edge_norms[0].state_dict())
+            for norm in copy.node_norms:
+                norm.load_state_dict(self.node_norms[0].state_dict())
         return copy.train(self.training)
 
     def wider_copy(self, hidden: int, seed: int = 0) -> AggregationGNN:
@@ -312,6 +328,8 @@ class AggregationGNN(nn.Module):
         old_width = self.config.hidden
         if hidden <= old_width:
             raise ValueError(f"wider_copy needs hidden > {old_width}, got {hidden}")
+        if self.config.norm:
+            raise ValueError("wider_copy cannot keep the function of a model with norm")
         parameter = self.readout.weight
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(seed)
@@ -347,6 +365,16 @@ class AggregationGNN(nn.Module):
         if grown.config != config:
             raise ValueError(f"a {self.config} cannot grow into a {config}")
         return grown
+
+    def norms(self, hop: int) -> tuple[nn.LayerNorm | None, nn.LayerNorm | None]:
+        """The edge and node layer norms at ``hop`` (``None`` without ``norm``, and for the
+        node after the last hop with ``per_hop``)."""
+        if not self.config.norm:
+            return None, None
+        if not self.config.per_hop:
+            return self.edge_norms[0], self.node_norms[0]
+        node_norm = self.node_norms[hop] if hop < self.config.hops - 1 else None
+        return self.edge_norms[hop], node_norm
 
     def blocks(self, hop: int) -> tuple[nn.Sequential, nn.Sequential | None]:
         """The non-linear model's edge and node MLPs at ``hop`` (no node MLP after the last hop
@@ -489,6 +517,9 @@ class AggregationGNN(nn.Module):
             first += gathered[:, 0]
             first += gathered[:, 1]
             e_new = _run_tail(block.edge_tail, first)
+            edge_norm, node_norm = self.norms(hop)
+            if edge_norm is not None:
+                e_new = edge_norm(e_new)
             e = e_new + e_in if self.config.residual else e_new
             if last:
                 stages.append(e)
@@ -501,6 +532,8 @@ class AggregationGNN(nn.Module):
             first = torch.addmm(block.node_bias, aggregate, block.w_aggregate)
             h_self = h[:num_nodes]
             h_new = _run_tail(block.node_tail, first.addmm_(h_self, block.w_self))
+            if node_norm is not None:
+                h_new = node_norm(h_new)
             h = h_new + h_self if self.config.residual else h_new
         return stages
 
@@ -521,11 +554,14 @@ class AggregationGNN(nn.Module):
                 h = mean_aggregate(e, receivers, num_nodes, inverse_degree)
             else:
                 edge_block, node_block = self.blocks(hop)
+                edge_norm, node_norm = self.norms(hop)
                 e_new = edge_block(torch.cat([e, h[receivers], h[senders]], dim=1))
+                e_new = edge_norm(e_new) if edge_norm is not None else e_new
                 e = e_new + e if self.config.residual else e_new
                 if node_block is not None:
                     aggregate = mean_aggregate(e_new, receivers, num_nodes, inverse_degree)
                     h_new = node_block(torch.cat([aggregate, h], 1))
+                    h_new = node_norm(h_new) if node_norm is not None else h_new
                     h = h_new + h if self.config.residual else h_new
             stages.append(self.edge_decoder(e))
         return self.readout(torch.cat(stages, dim=1)).squeeze(1)
