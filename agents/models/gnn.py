@@ -175,13 +175,15 @@ def mean_operator(edge_index: torch.Tensor, num_nodes: int, dtype: torch.dtype) 
     senders, receivers = edge_index[0], edge_index[1]
     degree = torch.bincount(receivers, minlength=num_nodes)
     order = torch.argsort(receivers, stable=True)
-    rows = torch.zeros(num_nodes + 1, dtype=torch.long, device=edge_index.device)
+    # int32 indices: the CPU kernel (MKL) would otherwise convert them at every product
+    rows = torch.zeros(num_nodes + 1, dtype=torch.int32, device=edge_index.device)
     torch.cumsum(degree, 0, out=rows[1:])
+    columns = senders[order].to(torch.int32)
     values = (1.0 / degree.clamp(min=1).to(dtype))[receivers[order]]
     with warnings.catch_warnings():  # CSR is "beta" in torch; this use is plain and tested
         warnings.simplefilter("ignore", UserWarning)
         return torch.sparse_csr_tensor(
-            rows, senders[order], values, (num_nodes, num_nodes), check_invariants=False
+            rows, columns, values, (num_nodes, num_nodes), check_invariants=False
         )
 
 
