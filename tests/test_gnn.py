@@ -320,6 +320,9 @@ def test_weights_changed_in_place_reach_the_next_forward_without_gradients() -> 
         changed = model(*graph, out_edges=edges)
         model.load_state_dict(other.state_dict())
         loaded = model(*graph, out_edges=edges)
+        model.edge_blocks[0][0].weight.data.mul_(0.5)  # .data: no version bump
+        halved = model(*graph, out_edges=edges)
+        model.edge_blocks[0][0].weight.data.mul_(2.0)
     with torch.no_grad():
         assert not torch.allclose(before, changed)
         model.edge_blocks[1][0].weight.sub_(0.5)
@@ -327,6 +330,9 @@ def test_weights_changed_in_place_reach_the_next_forward_without_gradients() -> 
             model(*graph, out_edges=edges), model.reference_forward(*graph)[edges]
         )
     torch.testing.assert_close(loaded, other.reference_forward(*graph)[edges])
+    with torch.no_grad():
+        other.edge_blocks[0][0].weight.mul_(0.5)
+        torch.testing.assert_close(halved, other.reference_forward(*graph)[edges])
 
 
 def test_layer_norms_per_block_grow_per_hop_and_refuse_to_widen() -> None:

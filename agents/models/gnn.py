@@ -109,14 +109,15 @@ def mlp(inputs: int, hidden: int, layers: int) -> nn.Sequential:
 
 class _BlockWeights(NamedTuple):
     """One hop's MLP weights, transposed for ``addmm``: the edge MLP's first layer split into
-    its edge part ``w_edge (H, H)`` and its receiver and sender parts side by side
-    ``w_node_pair (H, 2H)`` (computed per node before the gather), the node MLP's into
+    its edge part ``w_edge (H, H)`` and its receiver and sender parts ``w_node_parts`` (two
+    ``(H, H)``, untransposed; computed per node before the gather), the node MLP's into
     ``w_aggregate`` and ``w_self``; each MLP's later layers as ``(bias, weight^T)`` pairs (a ReLU
-    before each). The node fields are empty after the last hop of a per-hop model."""
+    before each). The node fields are empty after the last hop of a per-hop model. All are
+    views of the parameters, so in-place changes to them show through."""
 
     edge_bias: torch.Tensor
     w_edge: torch.Tensor
-    w_node_pair: torch.Tensor
+    w_node_parts: tuple[torch.Tensor, torch.Tensor]
     edge_tail: tuple[tuple[torch.Tensor, torch.Tensor], ...]
     node_bias: torch.Tensor | None
     w_aggregate: torch.Tensor | None
@@ -442,7 +443,7 @@ class AggregationGNN(nn.Module):
     def _block_weights(self) -> list[_BlockWeights]:
         """Per hop, the weights of the edge and node MLPs as the fast path uses them (see
         :class:`_BlockWeights`). A shared block's are computed once; without gradients they
-        are kept until a first layer's weights change (in place, or for new tensors)."""
+        are kept until a first layer is replaced (they are views, so in-place changes show)."""
         if torch.is_grad_enabled():
             return self._split_block_weights()
         cached = self.__dict__.get("_weights_cache")
@@ -475,7 +476,7 @@ class AggregationGNN(nn.Module):
                 prepared[key] = _BlockWeights(
                     edge_block[0].bias,
                     w_edge.t(),
-                    torch.cat([w_receiver, w_sender], dim=0).t(),
+                    (w_receiver, w_sender),
                     _tail_of(edge_block),
                     *node,
                 )
@@ -505,6 +506,12 @@ class AggregationGNN(nn.Module):
         e = self.edge_encoder(edge_attr)
         stages = [e[out]]
         weights = self._block_weights()
+        # the receiver and sender parts side by side, (H, 2H): a copy, so made at every call
+        # (the cache holds views only, which follow even in-place changes to ``.data``)
+        node_pairs: dict[int, torch.Tensor] = {}
+        for block in weights:
+            if id(block) not in node_pairs:
+                node_pairs[id(block)] = torch.cat(block.w_node_parts, dim=0).t()
         for hop in range(hops):
             block = weights[hop]
             last = hop == hops - 1
@@ -513,7 +520,7 @@ class AggregationGNN(nn.Module):
             num_edges = out.shape[0] if last else field.edge_counts[hops - 2 - hop]
             e_in = e.index_select(0, out) if last else e[:num_edges]
             rows = out_rows if last else pair_rows[: 2 * num_edges]
-            pair = torch.mm(h, block.w_node_pair).view(2 * h.shape[0], hidden)
+            pair = torch.mm(h, node_pairs[id(block)]).view(2 * h.shape[0], hidden)
             gathered = pair.index_select(0, rows).view(num_edges, 2, hidden)
             first = torch.addmm(block.edge_bias, e_in, block.w_edge)
             first += gathered[:, 0]
