@@ -330,6 +330,11 @@ def test_weights_changed_in_place_reach_the_next_forward_without_gradients() -> 
             model(*graph, out_edges=edges), model.reference_forward(*graph)[edges]
         )
     torch.testing.assert_close(loaded, other.reference_forward(*graph)[edges])
+    third = AggregationGNN(GNNConfig(hops=3, per_hop=True, hidden=8)).double()
+    with torch.inference_mode():
+        model.load_state_dict(third.state_dict(), assign=True)  # new tensors
+        assigned = model(*graph, out_edges=edges)
+    torch.testing.assert_close(assigned, third.reference_forward(*graph)[edges])
     with torch.no_grad():
         other.edge_blocks[0][0].weight.mul_(0.5)
         torch.testing.assert_close(halved, other.reference_forward(*graph)[edges])

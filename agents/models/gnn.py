@@ -240,7 +240,6 @@ def receptive_field(
     for _ in range(hops - 1):  # Bellman-Ford rounds toward the outputs, up to hops - 1
         reach = distance.index_select(0, receivers) + 1
         distance = distance.scatter_reduce(0, senders, reach, "amin")
-    distance = distance.clamp_(max=far)
     node_order = torch.argsort(distance, stable=True)
     node_counts = torch.bincount(distance, minlength=far + 1).cumsum(0).tolist()
     node_order = node_order[: node_counts[hops - 1]]
@@ -442,23 +441,18 @@ class AggregationGNN(nn.Module):
 
     def _block_weights(self) -> list[_BlockWeights]:
         """Per hop, the weights of the edge and node MLPs as the fast path uses them (see
-        :class:`_BlockWeights`). A shared block's are computed once; without gradients they
-        are kept until a first layer is replaced (they are views, so in-place changes show)."""
+        :class:`_BlockWeights`). A shared block's are computed once. Without gradients they
+        are kept between calls: they are views, so in-place changes show through, and they are
+        made afresh when the module holds new tensors (``to()``, ``load_state_dict(assign=True)``;
+        seen on the edge blocks' first layers)."""
         if torch.is_grad_enabled():
             return self._split_block_weights()
+        blocks = self.edge_blocks if self.config.per_hop else [self.edge_block]
+        key = [block[0].weight.data_ptr() for block in blocks]  # the blocks' current tensors
         cached = self.__dict__.get("_weights_cache")
-        if cached is not None:
-            key = [(w.data_ptr(), w._version) for w in cached[1]]
-            if key == cached[0]:
-                return cached[2]
-        blocks = {
-            id(b): b for hop in range(self.config.hops) for b in self.blocks(hop) if b is not None
-        }
-        firsts = [block[0].weight for block in blocks.values()]
-        # the split weights are views of the first layers, but for the concatenated pair
-        key = [(w.data_ptr(), w._version) for w in firsts]
-        self.__dict__["_weights_cache"] = (key, firsts, self._split_block_weights())
-        return self.__dict__["_weights_cache"][2]
+        if cached is None or cached[0] != key:
+            cached = self.__dict__["_weights_cache"] = (key, self._split_block_weights())
+        return cached[1]
 
     def _split_block_weights(self) -> list[_BlockWeights]:
         """:meth:`_block_weights`, computed."""
