@@ -9,6 +9,7 @@
     python scripts/evaluate.py policy=gnn map=paper                 # the shipped model
     python scripts/evaluate.py policy=gnn checkpoint=outputs/bc/nonlinear_k19/best.pt \
         map=paper_large num_robots=100 gnn.centralized=true
+    python scripts/evaluate.py policy=gnn checkpoint=A.pt,B.pt,C.pt map=paper  # an ensemble
 
 Tasks: ``coverage`` or ``exploration`` (the map is discovered with a range sensor,
 ``sensor_range=22``); ``task`` also picks the shipped model. In exploration the experts are
@@ -19,8 +20,9 @@ Policies: ``greedy`` (each robot on its ego-graph), ``greedy_central`` (same act
 ``expert.clock=false``: over ``hops`` steps even near the end, blind to the clock),
 ``gnn`` (the shipped model of the task, or ``checkpoint=PATH``; each robot on its own ego-graph,
 or ``gnn.centralized=true`` for one pass over ``state()``; argmax actions unless
-``gnn.deterministic=false``). A GNN runs with the receptive field it was trained with: ``hops``
-defaults to the model's.
+``gnn.deterministic=false``; comma-separated files play as one ensemble,
+``agents.models.policy.EnsemblePolicy``). A GNN runs with the receptive field it was trained
+with: ``hops`` defaults to the model's (the largest of an ensemble's).
 Maps: ``city`` (default), ``paper`` (windows of the paper's map), ``paper_full``,
 ``paper_large``, or a grid file. Any other ``key=value`` is a field of ``CoverageConfig``
 (``num_robots=10``, ``max_steps=49``, ...); an unknown key is an error.
@@ -72,6 +74,7 @@ class EvaluateOptions:
     out: str = "outputs/evaluate.json"
     fallback: str = "random"  # greedy's choice when nothing is in reach
     checkpoint: str | None = None  # policy=gnn: a model file (default: the shipped model)
+    # or comma-separated model files: an ensemble
 
 
 def parse_overrides(
@@ -130,23 +133,27 @@ def parse_overrides(
 
 
 def load_gnn(options: EvaluateOptions, env_overrides: dict[str, Any]) -> tuple[Any, dict]:
-    """The GNN to evaluate and its metadata; sets ``hops`` to the model's unless given."""
+    """The GNN to evaluate (a list of them for an ensemble) and its metadata; sets ``hops`` to
+    the model's (the largest) unless given."""
     import torch
 
     from agents.models.policy import load_model
     from agents.models.shipped import shipped_model_path
 
     torch.set_num_threads(1)  # controller times are quoted for one thread
-    path = options.checkpoint or shipped_model_path(options.task)
+    path = options.checkpoint or str(shipped_model_path(options.task))
     try:
-        model, metadata = load_model(path)
+        loaded = [load_model(part) for part in path.split(",")]
     except (FileNotFoundError, ValueError) as error:
         raise SystemExit(str(error)) from error
-    env_overrides.setdefault("hops", model.config.hops)
-    if env_overrides["hops"] < model.config.hops:
+    (model, metadata), hops = loaded[0], max(m.config.hops for m, _ in loaded)
+    if len(loaded) > 1:
+        model, metadata = [m for m, _ in loaded], {"ensemble": path.split(",")}
+    env_overrides.setdefault("hops", hops)
+    if env_overrides["hops"] < hops:
         print(
             f"note: ego-graphs of {env_overrides['hops']} hops are smaller than the model's "
-            f"receptive field ({model.config.hops})",
+            f"receptive field ({hops})",
             file=sys.stderr,
         )
     return model, {"path": str(path), **metadata}
@@ -156,9 +163,10 @@ def make_policy(
     options: EvaluateOptions, expert: ExpertOptions, hops: int, gnn: GNNOptions, model: Any = None
 ) -> Any:
     if options.policy == "gnn":
-        from agents.models.policy import GNNPolicy
+        from agents.models.policy import EnsemblePolicy, GNNPolicy
 
-        return GNNPolicy(model, centralized=gnn.centralized, deterministic=gnn.deterministic)
+        cls = EnsemblePolicy if isinstance(model, list) else GNNPolicy
+        return cls(model, centralized=gnn.centralized, deterministic=gnn.deterministic)
     if options.policy in ("greedy", "greedy_central"):
         from agents.greedy import CentralizedGreedyPolicy, GreedyPolicy
 

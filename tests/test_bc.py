@@ -504,3 +504,77 @@ def test_dagger_fraction_fixes_the_share_of_learner_states_in_a_batch(
         [*command[:2], "model.depth=3"], capture_output=True, text=True, cwd=root, timeout=300
     )
     assert bad.returncode != 0 and "depth" in bad.stderr
+
+
+def test_dagger_reuse_adds_another_runs_labelled_states(tmp_path, monkeypatch) -> None:
+    pytest.importorskip("pyvrp")
+    import agents.training.bc as bc
+    from agents.datasets import read_shard
+
+    small_dataset(tmp_path / "data")
+    dagger = DaggerConfig(rounds=1, episodes=2, beta=0.0, steps=10, iterations=30, fraction=0.5)
+    train_bc(small_config(tmp_path, "first", steps=10, val_every=10, dagger=dagger))
+    folder = tmp_path / "first" / "dagger"
+    reused_steps = sum(e.num_steps for e in read_shard(folder / "shard_00000.npz"))
+    assert reused_steps == 2 * SMALL_ENV["max_steps"]
+
+    sizes, real = [], bc.mixed_batch
+
+    def recording(buffer, own, batch_size, own_size):  # noqa: ANN001, ANN202
+        sizes.append(len(own))
+        return real(buffer, own, batch_size, own_size)
+
+    monkeypatch.setattr(bc, "mixed_batch", recording)
+    # no rounds of its own: the reused states fill the learner share of every batch
+    reuse = DaggerConfig(fraction=0.5, reuse=[str(folder)])
+    assert train_bc(small_config(tmp_path, "second", steps=5, val_every=5, dagger=reuse))
+    assert sizes == [reused_steps] * 5
+    sizes.clear()
+    # with a round: first the reused states alone, then the new round's beside them
+    more = DaggerConfig(**{**vars(dagger), "seed": 1200, "reuse": [str(folder)]})
+    assert train_bc(small_config(tmp_path, "third", steps=3, val_every=5, dagger=more))
+    assert sizes == [reused_steps] * 3 + [2 * reused_steps] * 10
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(FileNotFoundError, match=r"dagger.reuse: .*empty holds no DAgger shards"):
+        train_bc(
+            small_config(tmp_path, "fourth", dagger=DaggerConfig(reuse=[str(tmp_path / "empty")]))
+        )
+
+
+def test_dagger_can_distill_an_ensemble_of_networks(tmp_path) -> None:
+    from agents.datasets import read_shard
+    from agents.models.policy import EnsemblePolicy
+
+    small_dataset(tmp_path / "data")
+    train_bc(small_config(tmp_path, "a", steps=40, val_every=40))
+    train_bc(small_config(tmp_path, "b", steps=40, val_every=40, seed=5))
+    teacher = [str(tmp_path / "a" / "model.pt"), str(tmp_path / "b" / "model.pt")]
+    dagger = DaggerConfig(
+        rounds=1, episodes=2, beta=1.0, steps=5, seed=300, expert_mode="gnn", teacher=teacher
+    )
+    train_bc(small_config(tmp_path, "student", steps=5, val_every=5, dagger=dagger))
+    members = [load_model(path)[0] for path in teacher]
+    ensemble = EnsemblePolicy(members, centralized=True)
+    env = marl_cover.parallel_env(**SMALL_ENV)
+    for episode in read_shard(tmp_path / "student" / "dagger" / "shard_00000.npz"):
+        env.reset(seed=episode.seed)
+        assert episode.fallbacks == 0
+        for step, label in enumerate(episode.actions):
+            # the label: the argmax of the members' mean log-probabilities
+            state = {k: torch.as_tensor(v) for k, v in env.state().items()}
+            pooled = sum(torch.log_softmax(centralized_logits(m, state), -1) for m in members)
+            chosen = pooled.gather(-1, torch.as_tensor(label, dtype=torch.int64)[:, None])
+            torch.testing.assert_close(chosen[:, 0], pooled.max(-1).values, atol=1e-5, rtol=0)
+            assert np.array_equal(label, ensemble.act_state(env.state()))
+            env.step(dict(zip(env.possible_agents, label.tolist(), strict=True)))  # beta = 1
+            assert np.array_equal(env.snapshot().robot_node, episode.robot_node[step + 1])
+    # decentralized, the ensemble takes the same actions
+    observations, _ = env.reset(seed=4)
+    decentralized = EnsemblePolicy(members).act(observations)
+    assert list(decentralized.values()) == ensemble.act_state(env.state()).tolist()
+    with pytest.raises(ValueError, match="go together"):
+        DaggerConfig(expert_mode="gnn")
+    with pytest.raises(ValueError, match="go together"):
+        DaggerConfig(teacher=teacher)
+    with pytest.raises(ValueError, match="at least one model"):
+        EnsemblePolicy([])

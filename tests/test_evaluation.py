@@ -152,6 +152,34 @@ def test_cli_evaluates_a_gnn_checkpoint_both_ways(tmp_path) -> None:
     assert result.returncode != 0 and "missing.pt" in result.stderr
 
 
+def test_cli_evaluates_an_ensemble_of_checkpoints(tmp_path) -> None:
+    torch = pytest.importorskip("torch")
+    from agents.models import AggregationGNN, GNNConfig
+    from agents.models.policy import EnsemblePolicy, save_model
+
+    torch.manual_seed(0)
+    models = [AggregationGNN(GNNConfig(kind="nonlinear", hops=h)) for h in (3, 5)]
+    paths = [tmp_path / f"m{i}.pt" for i in range(2)]
+    for model, path in zip(models, paths, strict=True):
+        save_model(path, model, {})
+    out = tmp_path / "ensemble.json"
+    checkpoint = ",".join(map(str, paths))
+    result = run_cli(
+        "policy=gnn", f"checkpoint={checkpoint}", "episodes=3", "max_steps=10", f"out={out}"
+    )
+    assert result.returncode == 0, result.stderr
+    record = json.loads(out.read_text())
+    assert record["env"]["hops"] == 5  # the largest receptive field
+    assert record["gnn"]["ensemble"] == [str(p) for p in paths]
+    env = marl_cover.parallel_env(hops=5, max_steps=10)
+    expected = evaluate(env, EnsemblePolicy(models), range(3))
+    assert [r["reward"] for r in record["summary"]["results"]] == [
+        r.reward for r in expected.results
+    ]
+    result = run_cli("policy=gnn", f"checkpoint={paths[0]},{tmp_path / 'gone.pt'}", "episodes=1")
+    assert result.returncode != 0 and "gone.pt" in result.stderr
+
+
 def write_rewards(path: Path, rewards: dict[int, float]) -> Path:
     lines = ["seed,reward,coverage"] + [f"{s},{r},0.5" for s, r in rewards.items()]
     path.write_text("\n".join(lines) + "\n")

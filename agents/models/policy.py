@@ -271,10 +271,53 @@ class GNNPolicy:
         return dict(zip(observations, actions.tolist(), strict=True))
 
     @torch.inference_mode()
+    def state_logits(self, state: dict[str, np.ndarray]) -> torch.Tensor:
+        """Every robot's action logits ``(R, 5)`` from one pass over ``state()``."""
+        tensors = {key: self._tensor(value) for key, value in state.items()}
+        return centralized_logits(self.model, tensors)
+
     def _act_state(self, state: dict[str, np.ndarray]) -> np.ndarray:
         """Every robot's action ``(R,)`` from one pass over ``state()`` (centralized)."""
-        tensors = {key: self._tensor(value) for key, value in state.items()}
-        return self._choose(centralized_logits(self.model, tensors))
+        return self._choose(self.state_logits(state))
+
+
+class EnsemblePolicy(GNNPolicy):
+    """Several GNNs playing as one: every robot scores an action by the mean of the members'
+    log-probabilities (the normalised product of their distributions) and takes the best.
+
+    A teacher for distillation (``dagger.expert_mode=gnn`` in behaviour cloning) more than a
+    controller: it costs the sum of its members' time.
+
+    Args:
+        models: The members (any configs; they see the same observations).
+        centralized, deterministic, seed: As for :class:`GNNPolicy`.
+
+    Raises:
+        ValueError: no member.
+    """
+
+    def __init__(
+        self,
+        models: list[AggregationGNN],
+        centralized: bool = False,
+        deterministic: bool = True,
+        seed: int = 0,
+    ) -> None:
+        if not models:
+            raise ValueError("an ensemble needs at least one model")
+        super().__init__(models[0], centralized, deterministic, seed)
+        self.members = [GNNPolicy(model) for model in models]
+
+    def logits(self, observations: dict[str, dict[str, np.ndarray]]) -> torch.Tensor:
+        return _pooled([member.logits(observations) for member in self.members])
+
+    def state_logits(self, state: dict[str, np.ndarray]) -> torch.Tensor:
+        return _pooled([member.state_logits(state) for member in self.members])
+
+
+def _pooled(logits: list[torch.Tensor]) -> torch.Tensor:
+    """The mean of log-softmaxed logits ``(R, 5)`` (masked actions stay ``-inf``)."""
+    return torch.stack([torch.log_softmax(x.double(), dim=-1) for x in logits]).mean(dim=0)
 
 
 def _entry(observations: dict[str, dict[str, np.ndarray]], agent: str, key: str) -> np.ndarray:

@@ -48,7 +48,7 @@ from agents.cli import write_text_atomic
 from agents.datasets import SHARD_PATTERN, Episode, load_dataset, read_shard, write_shard
 from agents.evaluation import evaluate
 from agents.models.gnn import AggregationGNN, GNNConfig, action_logits
-from agents.models.policy import GNNPolicy, load_model, save_model
+from agents.models.policy import EnsemblePolicy, GNNPolicy, load_model, save_model
 from agents.training.data import GraphTable, collate_states, episode_transitions
 from agents.training.runs import LOGGERS, check_same_run, make_logger
 from marl_cover.env import CoverageEnv
@@ -72,8 +72,11 @@ class DaggerConfig:
             rest from the expert dataset). ``None``: the DAgger states join the dataset and
             are drawn as often as any transition (a few percent of a batch).
         expert_mode: The labelling expert: ``"open_loop"`` (the dataset's expert, re-planned
-            from each state the learner leads to) or ``"receding"`` (plans over
-            ``expert_horizon`` steps at every state).
+            from each state the learner leads to), ``"receding"`` (plans over
+            ``expert_horizon`` steps at every state) or ``"gnn"`` (distillation: the argmax of
+            the ``teacher`` networks' pooled log-probabilities, see
+            :class:`~agents.models.policy.EnsemblePolicy`; labels cost a forward pass, not a
+            solve).
         expert_horizon: Planning horizon of the receding expert, in steps.
         expert_clock: ``False``: the receding expert plans over ``expert_horizon`` steps even
             near the end of the episode, so its labels depend only on what the (clock-blind)
@@ -82,6 +85,11 @@ class DaggerConfig:
             "num_robots": 10, "max_steps": 131}``: states of a larger map and team than the
             dataset's). With any, the DAgger states are collated apart from the dataset's
             (their own graphs, team size and padding) and ``fraction`` is required.
+        reuse: Folders of DAgger shards labelled by earlier runs (their ``out/dagger``), which
+            join this run's DAgger states before its first round: states another learner
+            visited, labelled by the same kind of expert, are more data near the learner's
+            distribution. They must come from the same roll-out env as this run's.
+        teacher: Model files of the ``expert_mode=gnn`` teacher (one or more).
     """
 
     rounds: int = 0
@@ -96,14 +104,19 @@ class DaggerConfig:
     expert_horizon: int | None = None
     expert_clock: bool = True
     env: dict[str, Any] = field(default_factory=dict)
+    reuse: list[str] = field(default_factory=list)
+    teacher: list[str] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         if self.fraction is not None and not 0.0 < self.fraction < 1.0:
             raise ValueError(f"dagger.fraction must be in (0, 1) or null, got {self.fraction}")
-        if self.expert_mode not in ("open_loop", "receding"):
+        if self.expert_mode not in ("open_loop", "receding", "gnn"):
             raise ValueError(
-                f"dagger.expert_mode must be 'open_loop' or 'receding', got {self.expert_mode!r}"
+                "dagger.expert_mode must be 'open_loop', 'receding' or 'gnn', "
+                f"got {self.expert_mode!r}"
             )
+        if (self.expert_mode == "gnn") != bool(self.teacher):
+            raise ValueError("dagger.expert_mode=gnn and dagger.teacher (model files) go together")
         if self.expert_mode == "receding" and (
             self.expert_horizon is None or self.expert_horizon < 1
         ):
@@ -282,27 +295,23 @@ def dagger_round(
     label at a state the learner led to is the first hop of a fresh plan from that state; the
     receding expert (``dagger.expert_mode``) plans afresh at every state.
     """
-    from agents.experts import RoutingExpert
-
     dagger = config.dagger
     beta = dagger.beta * dagger.beta_decay**round_index
     policy = GNNPolicy(model, centralized=True)
     first = dagger.seed + round_index * dagger.episodes
+    teacher = _teacher(dagger)
     episodes = []
     for seed in range(first, first + dagger.episodes):
-        expert = RoutingExpert(
-            mode=dagger.expert_mode,
-            horizon=dagger.expert_horizon,
-            clock=dagger.expert_clock,
-            max_iterations=dagger.iterations,
-            seed=seed,
-        )
+        expert = _routing_expert(dagger, seed) if teacher is None else None
         rng = np.random.default_rng(seed)
         env.reset(seed=seed)
         start = env.snapshot()
         positions, labels = [start.robot_node.copy()], []
         while env.agents:
-            label = expert.act_snapshot(env.snapshot())
+            if expert is None:
+                label = teacher.act_state(env.state())
+            else:
+                label = expert.act_snapshot(env.snapshot())
             learner = policy.act_state(env.state())
             executed = np.where(rng.random(len(label)) < beta, label, learner)
             labels.append(label)
@@ -315,11 +324,31 @@ def dagger_round(
                 interest=start.interest.copy(),
                 robot_node=np.array(positions, dtype=np.int64),
                 actions=np.array(labels, dtype=np.int8),
-                fallbacks=int(expert.counts.get("fallback_steps", 0)),
+                fallbacks=0 if expert is None else int(expert.counts.get("fallback_steps", 0)),
             )
         )
     model.train()
     return episodes
+
+
+def _routing_expert(dagger: DaggerConfig, seed: int) -> Any:
+    """The routing expert that labels one roll-out."""
+    from agents.experts import RoutingExpert
+
+    return RoutingExpert(
+        mode=dagger.expert_mode,
+        horizon=dagger.expert_horizon,
+        clock=dagger.expert_clock,
+        max_iterations=dagger.iterations,
+        seed=seed,
+    )
+
+
+def _teacher(dagger: DaggerConfig) -> EnsemblePolicy | None:
+    """The ``expert_mode=gnn`` teacher (centralized, argmax), ``None`` for a routing expert."""
+    if dagger.expert_mode != "gnn":
+        return None
+    return EnsemblePolicy([load_model(path)[0] for path in dagger.teacher], centralized=True)
 
 
 def _sensor_range(env: CoverageEnv) -> float | None:
@@ -335,6 +364,20 @@ def _phase(step: int, config: BCConfig) -> tuple[int, int]:
         return 0, step
     offset = step - config.steps
     return 1 + offset // config.dagger.steps, offset % config.dagger.steps
+
+
+def reused_shards(folders: list[str]) -> list[Path]:
+    """The shard files of the ``dagger.reuse`` folders, in order; a clear error for a folder
+    that is missing or holds none."""
+    paths = []
+    for folder in folders:
+        shards = sorted(Path(folder).glob(SHARD_PATTERN.replace("{:05d}", "*")))
+        if not shards:
+            raise FileNotFoundError(
+                f"dagger.reuse: {folder} holds no DAgger shards ({SHARD_PATTERN.format(0)}, ...)"
+            )
+        paths.extend(shards)
+    return paths
 
 
 # ---------------------------------------------------------------------------- the loop
@@ -371,6 +414,7 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
     max_nodes = max([e.graph.num_nodes for e in train + val] + [env.max_waypoints])
     dagger_shards = [out / "dagger" / SHARD_PATTERN.format(k) for k in range(config.dagger.rounds)]
     dagger_episodes = [read_shard(path) for path in dagger_shards if path.exists()]
+    reused = [read_shard(path) for path in reused_shards(config.dagger.reuse)]
     table = GraphTable([e.graph for e in train + val], max_nodes)
     # exploration: transitions carry what the team had discovered (same sensor as the env)
     sensor = _sensor_range(env)
@@ -382,6 +426,7 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
     rollout_steps, rollout_sensor = rollout_env.config.max_steps, _sensor_range(rollout_env)
     own_table: GraphTable | None = None
     dagger_capacity = config.dagger.rounds * config.dagger.episodes * rollout_steps
+    dagger_capacity += sum(e.num_steps for episodes in reused for e in episodes)
     # with dagger.fraction the DAgger states have a buffer of their own, drawn from at that rate
     fraction = config.dagger.fraction
     own_size = 0 if fraction is None else max(1, round(fraction * config.batch_size))
@@ -415,7 +460,7 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
         extra = Part(own.sample(own_size), own_table, rollout_steps)
         return buffer.sample(config.batch_size - own_size), extra
 
-    for episodes in dagger_episodes:
+    for episodes in reused + dagger_episodes:
         add_dagger(episodes)
 
     model = AggregationGNN(config.model)
