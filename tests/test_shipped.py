@@ -19,7 +19,7 @@ from agents.models.shipped import SHIPPED, shipped_model_path  # noqa: E402
 #: Rewards of each shipped model (float64, argmax) on procedural cities, seeds 0..4, 4 robots.
 GOLDEN_CITY = {
     "coverage": [80.0, 86.0, 88.0, 96.0, 81.0],
-    "exploration": [80.0, 86.0, 72.0, 92.0, 92.0],
+    "exploration": [95.0, 87.0, 87.0, 89.0, 86.0],
 }
 
 
@@ -93,15 +93,24 @@ def test_the_per_hop_dagger_model_grows_from_the_dagger_model() -> None:
     assert city_rewards(model) == [87.0, 91.0, 85.0, 94.0, 78.0]
 
 
-def test_the_exploration_model_grows_from_the_per_hop_coverage_model() -> None:
-    """``exploration_gnn.pt``: the per-hop coverage model trained on its own exploration states;
-    the MAPPO fine-tune it replaced ships beside it in ``mappo/`` with its card."""
+def test_the_exploration_model_averages_the_per_hop_coverage_model_trained_on_exploration() -> None:
+    """``exploration_gnn.pt``: the weight average of the snapshots of the per-hop coverage model
+    trained on its own exploration states; the snapshot it replaced ships in ``dagger_per_hop/``
+    and the MAPPO fine-tune before it in ``mappo/``, each with its card."""
     model, metadata = load_model(shipped_model_path("exploration"))
     card = json.loads((SHIPPED / "exploration_gnn.json").read_text())
     assert model.config.per_hop and card["config"]["env"]["task"] == "exploration"
     assert card["config"]["init"] == "agents/models/shipped/dagger_per_hop/coverage_gnn.pt"
     assert card["init_sha256"] == file_sha256(SHIPPED / "dagger_per_hop" / "coverage_gnn.pt")
-    assert metadata["step"] == 8000 and metadata["dataset"].endswith("coverage_expert")
+    steps = [f"step_{s:06d}.pt" for s in range(8000, 17000, 1000)]
+    assert [path.rsplit("/", 1)[1] for path in metadata["average_of"]] == steps
+    assert metadata["dataset"].endswith("coverage_expert")
+    snapshot, snapshot_metadata = load_model(SHIPPED / "dagger_per_hop" / "exploration_gnn.pt")
+    assert snapshot.config == model.config and snapshot_metadata["step"] == 8000
+    assert "average_of" not in snapshot_metadata
+    env = marl_cover.parallel_env(hops=19, task="exploration")
+    rewards = [r.reward for r in evaluate(env, GNNPolicy(snapshot.double()), range(5)).results]
+    assert rewards == [80.0, 86.0, 72.0, 92.0, 92.0]
     previous, previous_metadata = load_model(SHIPPED / "mappo" / "exploration_gnn.pt")
     assert not previous.config.per_hop and previous_metadata["init"]["dataset"]
     assert "mappo" in json.loads((SHIPPED / "mappo" / "exploration_gnn.json").read_text())["model"]
