@@ -142,13 +142,14 @@ def load_gnn(options: EvaluateOptions, env_overrides: dict[str, Any]) -> tuple[A
 
     torch.set_num_threads(1)  # controller times are quoted for one thread
     path = options.checkpoint or str(shipped_model_path(options.task))
+    parts = path.split(",")
     try:
-        loaded = [load_model(part) for part in path.split(",")]
+        loaded = [load_model(part) for part in parts]
     except (FileNotFoundError, ValueError) as error:
         raise SystemExit(str(error)) from error
     (model, metadata), hops = loaded[0], max(m.config.hops for m, _ in loaded)
-    if len(loaded) > 1:
-        model, metadata = [m for m, _ in loaded], {"ensemble": path.split(",")}
+    if len(parts) > 1:
+        model, metadata = [m for m, _ in loaded], {"ensemble": parts}
     env_overrides.setdefault("hops", hops)
     if env_overrides["hops"] < hops:
         print(

@@ -302,17 +302,18 @@ def dagger_round(
     teacher = _teacher(dagger)
     episodes = []
     for seed in range(first, first + dagger.episodes):
-        expert = _routing_expert(dagger, seed) if teacher is None else None
+        expert = None if teacher is not None else _routing_expert(dagger, seed)
         rng = np.random.default_rng(seed)
         env.reset(seed=seed)
         start = env.snapshot()
         positions, labels = [start.robot_node.copy()], []
         while env.agents:
+            state = env.state()
             if expert is None:
-                label = teacher.act_state(env.state())
+                label = teacher.act_state(state)
             else:
                 label = expert.act_snapshot(env.snapshot())
-            learner = policy.act_state(env.state())
+            learner = policy.act_state(state)
             executed = np.where(rng.random(len(label)) < beta, label, learner)
             labels.append(label)
             env.step(dict(zip(env.possible_agents, executed.tolist(), strict=True)))
@@ -366,18 +367,18 @@ def _phase(step: int, config: BCConfig) -> tuple[int, int]:
     return 1 + offset // config.dagger.steps, offset % config.dagger.steps
 
 
-def reused_shards(folders: list[str]) -> list[Path]:
-    """The shard files of the ``dagger.reuse`` folders, in order; a clear error for a folder
-    that is missing or holds none."""
-    paths = []
+def reused_episodes(folders: list[str]) -> list[list[Episode]]:
+    """The labelled episodes of each ``dagger.reuse`` folder; a clear error for a folder that
+    is missing or holds no shards."""
+    reused = []
     for folder in folders:
-        shards = sorted(Path(folder).glob(SHARD_PATTERN.replace("{:05d}", "*")))
-        if not shards:
+        try:
+            reused.append(load_dataset(folder))
+        except FileNotFoundError:
             raise FileNotFoundError(
                 f"dagger.reuse: {folder} holds no DAgger shards ({SHARD_PATTERN.format(0)}, ...)"
-            )
-        paths.extend(shards)
-    return paths
+            ) from None
+    return reused
 
 
 # ---------------------------------------------------------------------------- the loop
@@ -414,7 +415,7 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
     max_nodes = max([e.graph.num_nodes for e in train + val] + [env.max_waypoints])
     dagger_shards = [out / "dagger" / SHARD_PATTERN.format(k) for k in range(config.dagger.rounds)]
     dagger_episodes = [read_shard(path) for path in dagger_shards if path.exists()]
-    reused = [read_shard(path) for path in reused_shards(config.dagger.reuse)]
+    reused = reused_episodes(config.dagger.reuse)
     table = GraphTable([e.graph for e in train + val], max_nodes)
     # exploration: transitions carry what the team had discovered (same sensor as the env)
     sensor = _sensor_range(env)
