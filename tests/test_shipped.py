@@ -123,3 +123,22 @@ def test_the_linear_model_ships_with_its_card_and_golden_rewards() -> None:
     assert card["config"]["model"]["hidden"] == 32 and card["config"]["dagger"]["rounds"] == 5
     assert metadata["step"] == 10000 and metadata["dataset"].endswith("coverage_expert")
     assert city_rewards(model) == [83.0, 90.0, 86.0, 92.0, 94.0]
+
+
+def test_the_averaged_per_hop_model_averages_a_second_run_of_the_per_hop_recipe() -> None:
+    """``swa_per_hop/coverage_gnn.pt``: the mean of the last five snapshots of a second run of
+    the per-hop recipe (its own roll-out seeds), the window chosen by ``select_average.py``."""
+    model, metadata, card = shipped_beside("swa_per_hop")
+    per_hop, _, per_hop_card = shipped_beside("dagger_per_hop")
+    assert model.config == per_hop.config and model.config.per_hop
+    assert card["config"]["init"] == per_hop_card["config"]["init"]
+    assert card["init_sha256"] == file_sha256(SHIPPED / "dagger" / "coverage_gnn.pt")
+    recipe = ("rounds", "episodes", "beta", "steps", "fraction", "expert_mode", "expert_horizon")
+    assert {k: card["config"]["dagger"][k] for k in recipe} == {
+        k: per_hop_card["config"]["dagger"][k] for k in recipe
+    }
+    assert card["config"]["dagger"]["seed"] != per_hop_card["config"]["dagger"]["seed"]
+    steps = [f"step_{s:06d}.pt" for s in range(12000, 17000, 1000)]
+    assert [path.rsplit("/", 1)[1] for path in metadata["average_of"]] == steps
+    assert metadata["selection"]["chosen"] == "steps 12000..16000 (5)"
+    assert city_rewards(model) == [94.0, 90.0, 93.0, 95.0, 83.0]
