@@ -118,9 +118,10 @@ def evaluate_window(
     seeds: Sequence[int],
     cache: Path,
     progress: Callable[[Iterable[int]], Iterable[int]] | None = None,
+    sha256: dict[Path, str] | None = None,
 ) -> WindowResult:
     """Plays the average of ``window`` (argmax, each robot on its ego-graph) on ``seeds``, or
-    reads it back from ``cache``."""
+    reads it back from ``cache``; ``sha256``: the files' hashes when already known."""
     import torch
 
     from agents.evaluation import evaluate
@@ -131,7 +132,7 @@ def evaluate_window(
     files = [str(path) for _, path in window]
     setup = {
         "files": files,
-        "sha256": [file_sha256(path) for path in files],
+        "sha256": [(sha256 or {}).get(path) or file_sha256(path) for _, path in window],
         "env": env_kwargs,
         "seeds": list(seeds),
     }
@@ -167,9 +168,11 @@ def select_window(
         cache: Folder of the per-window results.
         progress: Optional wrapper such as ``tqdm`` around each window's seed iterator.
     """
-    windows = trailing_windows(snapshot_files(folder), sizes)  # before any folder is made
+    snapshots = snapshot_files(folder)  # before any folder is made
+    windows = trailing_windows(snapshots, sizes)
     cache = Path(cache)
     cache.mkdir(parents=True, exist_ok=True)
-    results = [evaluate_window(w, env_kwargs, seeds, cache, progress) for w in windows]
+    hashes = {path: file_sha256(path) for _, path in windows[0]}  # the largest window
+    results = [evaluate_window(w, env_kwargs, seeds, cache, progress, hashes) for w in windows]
     best = max(results, key=lambda r: (r.mean, len(r.steps)))
     return results, best

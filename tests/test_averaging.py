@@ -99,30 +99,21 @@ def test_ties_go_to_the_larger_window(tmp_path, monkeypatch) -> None:
     assert best.steps == [1000, 2000, 3000]
 
 
+def run_select(*args: str) -> subprocess.CompletedProcess:
+    """``scripts/select_average.py`` with ``args``."""
+    script = str(ROOT / "scripts" / "select_average.py")
+    return subprocess.run(
+        [sys.executable, script, *args], capture_output=True, text=True, cwd=ROOT, timeout=300
+    )
+
+
 def test_cli_writes_the_chosen_average(tmp_path) -> None:
     files = make_run(tmp_path / "run")
     out = tmp_path / "avg"
-    result = subprocess.run(
-        [
-            sys.executable,
-            str(ROOT / "scripts" / "select_average.py"),
-            str(tmp_path / "run"),
-            "--sizes",
-            "1",
-            "3",
-            "--map",
-            "city",
-            "--episodes",
-            "2",
-            "--seed",
-            "3",
-            "--out",
-            str(out),
-        ],
-        capture_output=True,
-        text=True,
-        cwd=ROOT,
-        timeout=300,
+    result = run_select(
+        str(tmp_path / "run"),
+        *("--sizes", "1", "3", "--map", "city", "--episodes", "2", "--seed", "3"),
+        *("--out", str(out)),
     )
     assert result.returncode == 0, result.stderr
     selection = json.loads((out / "selection.json").read_text())
@@ -134,12 +125,6 @@ def test_cli_writes_the_chosen_average(tmp_path) -> None:
     for key, value in expected.state_dict().items():
         assert torch.equal(model.state_dict()[key], value), key
     assert metadata["selection"]["chosen"] == chosen
-    missing = subprocess.run(
-        [sys.executable, str(ROOT / "scripts" / "select_average.py"), str(tmp_path / "nothing")],
-        capture_output=True,
-        text=True,
-        cwd=ROOT,
-        timeout=300,
-    )
+    missing = run_select(str(tmp_path / "nothing"))
     assert missing.returncode != 0 and "no snapshot folder" in missing.stderr
     assert not (tmp_path / "nothing").exists()
