@@ -18,7 +18,7 @@ from agents.models.shipped import SHIPPED, shipped_model_path  # noqa: E402
 
 #: Rewards of each shipped model (float64, argmax) on procedural cities, seeds 0..4, 4 robots.
 GOLDEN_CITY = {
-    "coverage": [80.0, 86.0, 88.0, 96.0, 81.0],
+    "coverage": [94.0, 90.0, 93.0, 95.0, 83.0],
     "exploration": [95.0, 87.0, 87.0, 89.0, 86.0],
 }
 
@@ -125,10 +125,11 @@ def test_the_linear_model_ships_with_its_card_and_golden_rewards() -> None:
     assert city_rewards(model) == [83.0, 90.0, 86.0, 92.0, 94.0]
 
 
-def test_the_averaged_per_hop_model_averages_a_second_run_of_the_per_hop_recipe() -> None:
-    """``swa_per_hop/coverage_gnn.pt``: the mean of the last five snapshots of a second run of
-    the per-hop recipe (its own roll-out seeds), the window chosen by ``select_average.py``."""
-    model, metadata, card = shipped_beside("swa_per_hop")
+def test_the_coverage_model_averages_a_second_run_of_the_per_hop_recipe() -> None:
+    """``coverage_gnn.pt`` (since session 20): the mean of the last five snapshots of a second run
+    of the per-hop recipe (its own roll-out seeds), the window chosen by ``select_average.py``."""
+    model, metadata = load_model(shipped_model_path("coverage"))
+    card = json.loads((SHIPPED / "coverage_gnn.json").read_text())
     per_hop, _, per_hop_card = shipped_beside("dagger_per_hop")
     assert model.config == per_hop.config and model.config.per_hop
     assert card["config"]["init"] == per_hop_card["config"]["init"]
@@ -141,4 +142,20 @@ def test_the_averaged_per_hop_model_averages_a_second_run_of_the_per_hop_recipe(
     steps = [f"step_{s:06d}.pt" for s in range(12000, 17000, 1000)]
     assert [path.rsplit("/", 1)[1] for path in metadata["average_of"]] == steps
     assert metadata["selection"]["chosen"] == "steps 12000..16000 (5)"
-    assert city_rewards(model) == [94.0, 90.0, 93.0, 95.0, 83.0]
+
+
+def test_the_mission_flies_the_mappo_fine_tune_which_ships_with_its_card() -> None:
+    """``mappo/coverage_gnn.pt``: the BC model fine-tuned by MAPPO (the coverage default until
+    session 19), the mission's model by default and in ``configs/mission.yaml``."""
+    from agents.configuration import load
+    from agents.mission import MissionConfig, mission_model_path
+
+    model, metadata, card = shipped_beside("mappo")
+    assert mission_model_path() == SHIPPED / "mappo" / "coverage_gnn.pt"
+    config = load(MissionConfig, SHIPPED.parents[2] / "configs" / "mission.yaml", [])
+    assert SHIPPED.parents[2] / config.checkpoint == mission_model_path()
+    assert MissionConfig().setup("gnn")["model_sha256"] == file_sha256(mission_model_path())
+    assert not model.config.per_hop and metadata["init"]["path"] == card["init"]["path"]
+    assert card["init"]["path"] == "agents/models/shipped/bc/coverage_gnn.pt"
+    assert "mappo" in card["model"]
+    assert city_rewards(model) == [80.0, 86.0, 88.0, 96.0, 81.0]
