@@ -25,8 +25,11 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
+from marl_cover.ego import NODE_FEATURES
+
 FALLBACKS = ("stay", "random")
-_TARGETS = [2, 3]  # columns is_interest and is_frontier of the node features
+#: Node-feature columns of a target: an unvisited point of interest or a frontier waypoint.
+TARGET_COLUMNS = [NODE_FEATURES.index("is_interest"), NODE_FEATURES.index("is_frontier")]
 
 
 def _distance_to_interest(
@@ -47,7 +50,7 @@ def _distance_to_interest(
     adjacency = csr_matrix(
         (np.ones(len(senders)), (senders, receivers)), shape=(num_nodes, num_nodes)
     )
-    sources = np.flatnonzero((nodes[:, _TARGETS] > 0).any(axis=1))
+    sources = np.flatnonzero((nodes[:, TARGET_COLUMNS] > 0).any(axis=1))
     if len(sources) == 0:
         return np.full(num_nodes, np.inf)
     return dijkstra(adjacency, indices=sources, unweighted=True, limit=limit, min_only=True)

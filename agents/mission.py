@@ -259,6 +259,10 @@ class MissionConfig:
             dynamics=self.dynamics,
         )
 
+    def gnn_model_path(self) -> Path:
+        """The GNN model file flown: ``checkpoint``, or :func:`mission_model_path`."""
+        return Path(self.checkpoint) if self.checkpoint else mission_model_path()
+
     def setup(self, method: str) -> dict[str, Any]:
         """What decides ``method``'s missions besides the seed (kept beside each run's result).
 
@@ -275,8 +279,7 @@ class MissionConfig:
         if method.startswith("greedy"):
             setup["hops"] = self.hops
         elif method == "gnn":
-            path = self.checkpoint or mission_model_path()
-            setup["model_sha256"] = file_sha256(path)
+            setup["model_sha256"] = file_sha256(self.gnn_model_path())
             setup["gnn_centralized"] = self.gnn_centralized
         elif method == "expert":
             setup["expert_iterations"] = self.expert_iterations
@@ -308,7 +311,7 @@ def make_mission_policy(method: str, config: MissionConfig) -> Any:
     if method == "gnn":
         from agents.models.policy import GNNPolicy, load_model
 
-        model, _ = load_model(config.checkpoint or mission_model_path())
+        model, _ = load_model(config.gnn_model_path())
         return GNNPolicy(model, centralized=config.gnn_centralized)
     if method == "expert":
         return MissionExpert(RoutingExpert(max_iterations=config.expert_iterations))

@@ -27,12 +27,11 @@ from typing import Any
 
 import numpy as np
 
+from agents.greedy import TARGET_COLUMNS
 from marl_cover.continuous import QuadrotorCoverageEnv
-from marl_cover.ego import NODE_FEATURES
 
 KINDS = ("stay", "back", "forward")
 BLIND_RULES = ("policy", "random", "sample")
-TARGET_COLUMNS = [NODE_FEATURES.index("is_interest"), NODE_FEATURES.index("is_frontier")]
 
 
 def target_in_view(observation: dict[str, np.ndarray]) -> bool:
@@ -74,6 +73,7 @@ class DecisionRecorder:
         self._index = {agent: i for i, agent in enumerate(env.possible_agents)}
         self._current = np.full(len(env.possible_agents), -1)  # (num_robots,)
         self._previous = np.full(len(env.possible_agents), -1)  # (num_robots,)
+        self._neighbors: np.ndarray | None = None  # (num_nodes, 4) of this mission's graph
 
     @property
     def deterministic(self) -> bool:
@@ -88,24 +88,24 @@ class DecisionRecorder:
             self._rng = np.random.default_rng(seed)
         self._current[:] = -1
         self._previous[:] = -1
+        self._neighbors = None  # the env is reset after the policy: read at the first decision
 
     def act(self, observations: dict[str, dict[str, np.ndarray]]) -> dict[str, int]:
         """The policy's actions (blind ones replaced by the ``blind`` rule), counted."""
         actions = dict(self.policy.act(observations))
-        blind = [agent for agent in observations if not target_in_view(observations[agent])]
+        blind = {agent for agent in observations if not target_in_view(observations[agent])}
         if self.blind != "policy" and blind:
             actions.update(self._blind_moves({agent: observations[agent] for agent in blind}))
-        neighbors = self.env.snapshot().graph.neighbors  # (num_nodes, 4)
-        for agent, action in actions.items():
-            if agent not in observations:
-                continue
-            robot = self._index[agent]
+        if self._neighbors is None:
+            self._neighbors = self.env.snapshot().graph.neighbors
+        for agent in observations:
+            action, robot = actions[agent], self._index[agent]
             node = int(self.env.snapped[robot])
             if node != self._current[robot]:
                 self._previous[robot], self._current[robot] = self._current[robot], node
             if action == 0:
                 kind = "stay"
-            elif neighbors[node, action - 1] == self._previous[robot]:
+            elif self._neighbors[node, action - 1] == self._previous[robot]:
                 kind = "back"
             else:
                 kind = "forward"
