@@ -1,6 +1,7 @@
 """Paired comparisons of evaluation runs: per-seed differences of two methods' rewards.
 
-``scripts/evaluate.py`` (and ``scripts/generalize.py``) write one row per episode seed. Two
+``scripts/evaluate.py`` (and ``scripts/generalize.py``) write one row per episode seed, and
+``scripts/run_mission.py`` one total per seed and method in its ``mission.json``. Two
 methods evaluated on the same seeds saw the same maps, starts and points of interest, so the
 SEM of their per-seed differences is far smaller than either method's own SEM; this is the
 figure the project's results quote as "paired +d +- s".
@@ -9,6 +10,7 @@ figure the project's results quote as "paired +d +- s".
 from __future__ import annotations
 
 import csv
+import json
 import math
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -35,6 +37,8 @@ class PairedComparison:
         difference: Mean of the per-seed differences ``other - base``.
         difference_sem: SEM of the per-seed differences.
         ratio: ``other_mean / base_mean`` (the ratio of the means; NaN if ``base_mean`` is 0).
+        seed_ratio: Mean of the per-seed ratios ``other / base`` (the quadrotor mission's
+            figure; NaN if a baseline reward is 0), its SEM in ``seed_ratio_sem``.
         wins: Seeds where ``other`` scored more than ``base`` (``losses``: less).
     """
 
@@ -48,6 +52,8 @@ class PairedComparison:
     difference: float
     difference_sem: float
     ratio: float
+    seed_ratio: float
+    seed_ratio_sem: float
     wins: int
     losses: int
 
@@ -87,6 +93,47 @@ def read_rewards(path: str | Path) -> dict[int, float]:
     return rewards
 
 
+def read_mission_totals(path: str | Path, method: str = "gnn") -> dict[int, float]:
+    """Points visited per seed by one method of a ``run_mission.py`` table (``mission.json``).
+
+    Raises:
+        FileNotFoundError: no such file.
+        ValueError: the file is not a mission table or has no such method (the message names
+            the file and the methods it has).
+    """
+    path = Path(path)
+    try:
+        table = json.loads(path.read_text())
+        seeds, methods = table["seeds"], table["methods"]
+    except (json.JSONDecodeError, KeyError, TypeError):
+        raise ValueError(
+            f"{path}: not a mission table (run_mission.py's mission.json, with 'seeds' and "
+            "'methods')"
+        ) from None
+    if method not in methods or "totals" not in methods[method]:
+        raise ValueError(f"{path}: no method {method!r} with totals (has {sorted(methods)})")
+    totals = methods[method]["totals"]
+    if len(totals) != len(seeds):
+        raise ValueError(f"{path}: {len(seeds)} seeds but {len(totals)} totals for {method!r}")
+    return {int(seed): float(total) for seed, total in zip(seeds, totals, strict=True)}
+
+
+def read_run(spec: str | Path) -> dict[int, float]:
+    """Reward per seed of a run named on the command line.
+
+    ``FILE.csv``: an evaluation CSV (:func:`read_rewards`); ``FILE.json`` or
+    ``FILE.json:METHOD``: a mission table's method (:func:`read_mission_totals`, ``gnn`` by
+    default), e.g. ``outputs/mission/mission.json:greedy``.
+    """
+    text = str(spec)
+    head, sep, method = text.rpartition(":")
+    if sep and head.endswith(".json"):
+        return read_mission_totals(head, method)
+    if text.endswith(".json"):
+        return read_mission_totals(text)
+    return read_rewards(text)
+
+
 def compare(
     base: dict[int, float],
     other: dict[int, float],
@@ -116,6 +163,8 @@ def compare(
     a = np.array([base[s] for s in seeds], dtype=np.float64)  # (episodes,)
     b = np.array([other[s] for s in seeds], dtype=np.float64)  # (episodes,)
     diff = b - a  # (episodes,)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratios = np.where(a != 0, b / np.where(a != 0, a, 1.0), math.nan)  # (episodes,)
     base_mean, other_mean = float(a.mean()), float(b.mean())
     return PairedComparison(
         base=base_name,
@@ -128,6 +177,8 @@ def compare(
         difference=float(diff.mean()),
         difference_sem=sem(diff),
         ratio=other_mean / base_mean if base_mean != 0 else math.nan,
+        seed_ratio=float(ratios.mean()),
+        seed_ratio_sem=sem(ratios),
         wins=int((diff > 0).sum()),
         losses=int((diff < 0).sum()),
     )

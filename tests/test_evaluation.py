@@ -201,6 +201,41 @@ def test_paired_comparison_of_two_runs(tmp_path: Path) -> None:
     assert row.difference_sem == pytest.approx(3.0 / 3**0.5)  # std of (2, -1, 5) is 3
     assert row.base_sem == pytest.approx(10.0 / 3**0.5)
     assert row.ratio == pytest.approx(1.1) and (row.wins, row.losses) == (2, 1)
+    # per-seed ratios 1.2, 0.95, 35 / 30
+    assert row.seed_ratio == pytest.approx((1.2 + 0.95 + 35 / 30) / 3)
+
+
+def write_mission(path: Path, seeds: list[int], totals: dict[str, list[float]]) -> Path:
+    """A table shaped like run_mission.py's mission.json."""
+    methods = {
+        name: {"totals": values, "mean": sum(values) / len(values)}
+        for name, values in totals.items()
+    }
+    path.write_text(json.dumps({"config": {}, "seeds": seeds, "methods": methods, "over_time": {}}))
+    return path
+
+
+def test_mission_tables_are_paired_by_method(tmp_path: Path) -> None:
+    from agents.comparison import compare, read_run
+
+    table = write_mission(
+        tmp_path / "mission.json", [3, 4], {"greedy": [100.0, 200.0], "gnn": [130.0, 220.0]}
+    )
+    greedy, gnn = read_run(f"{table}:greedy"), read_run(table)  # gnn by default
+    assert greedy == {3: 100.0, 4: 200.0} and gnn == {3: 130.0, 4: 220.0}
+    assert read_run(f"{table}:gnn") == gnn
+    row = compare(greedy, gnn, "greedy", "gnn")
+    assert row.seed_ratio == pytest.approx(1.2) and row.seed_ratio_sem == pytest.approx(0.1)
+    assert row.ratio == pytest.approx(350 / 300)
+    with pytest.raises(
+        ValueError,
+        match=r"mission.json: no method 'expert' with totals \(has \['gnn', 'greedy'\]\)",
+    ):
+        read_run(f"{table}:expert")
+    not_a_table = tmp_path / "eval.json"
+    not_a_table.write_text(json.dumps({"summary": {}}))
+    with pytest.raises(ValueError, match="eval.json: not a mission table"):
+        read_run(not_a_table)
 
 
 def test_comparison_refuses_unpaired_or_broken_files(tmp_path: Path) -> None:
@@ -234,6 +269,7 @@ def test_compare_script_prints_and_writes_the_table(tmp_path: Path) -> None:
         check=True,
     )
     assert "+2.00 +- 1.00" in done.stdout and "1.133" in done.stdout
+    assert "1.175 +- 0.125" in done.stdout  # per-seed ratios 1.3 and 1.05
     assert json.loads(out.read_text())[0]["difference"] == 2.0
     bad = subprocess.run(
         [sys.executable, script, str(base), str(tmp_path / "missing.csv")],
