@@ -67,27 +67,36 @@ def read_rewards(path: str | Path) -> dict[int, float]:
 
     Raises:
         FileNotFoundError: no such file.
-        ValueError: a column is missing, a value is not a number, or a seed repeats (the
-            message names the file and the row).
+        ValueError: the file is not text, a column is missing, a value is not a number, or a
+            seed repeats (the message names the file and the row).
     """
     path = Path(path)
-    with path.open(newline="") as handle:
-        reader = csv.DictReader(handle)
-        missing = {"seed", "reward"} - set(reader.fieldnames or ())
-        if missing:
-            raise ValueError(f"{path}: no column {sorted(missing)} (has {reader.fieldnames})")
-        rewards: dict[int, float] = {}
-        for row_number, row in enumerate(reader, start=2):
-            try:
-                seed, reward = int(row["seed"]), float(row["reward"])
-            except (TypeError, ValueError):
-                raise ValueError(
-                    f"{path}, line {row_number}: seed {row['seed']!r} / reward "
-                    f"{row['reward']!r} is not a number"
-                ) from None
-            if seed in rewards:
-                raise ValueError(f"{path}, line {row_number}: seed {seed} appears twice")
-            rewards[seed] = reward
+    try:
+        with path.open(newline="") as handle:
+            return _rewards_of_rows(path, csv.DictReader(handle))
+    except UnicodeDecodeError:
+        raise ValueError(
+            f"{path}: not a text file (an evaluation CSV, written by evaluate.py)"
+        ) from None
+
+
+def _rewards_of_rows(path: Path, reader: csv.DictReader) -> dict[int, float]:
+    """The reward per seed of an open evaluation CSV (see :func:`read_rewards`)."""
+    missing = {"seed", "reward"} - set(reader.fieldnames or ())
+    if missing:
+        raise ValueError(f"{path}: no column {sorted(missing)} (has {reader.fieldnames})")
+    rewards: dict[int, float] = {}
+    for row_number, row in enumerate(reader, start=2):
+        try:
+            seed, reward = int(row["seed"]), float(row["reward"])
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"{path}, line {row_number}: seed {row['seed']!r} / reward "
+                f"{row['reward']!r} is not a number"
+            ) from None
+        if seed in rewards:
+            raise ValueError(f"{path}, line {row_number}: seed {seed} appears twice")
+        rewards[seed] = reward
     if not rewards:
         raise ValueError(f"{path}: no episodes")
     return rewards

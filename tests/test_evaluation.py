@@ -251,6 +251,10 @@ def test_comparison_refuses_unpaired_or_broken_files(tmp_path: Path) -> None:
     no_reward.write_text("seed,score\n0,1\n")
     with pytest.raises(ValueError, match=r"no_reward.csv: no column \['reward'\]"):
         read_rewards(no_reward)
+    binary = tmp_path / "model.pt"
+    binary.write_bytes(b"PK\x03\x04\x80\x81\xff")
+    with pytest.raises(ValueError, match=r"model.pt: not a text file"):
+        read_rewards(binary)
     text = tmp_path / "text.csv"
     text.write_text("seed,reward\n0,lots\n")
     with pytest.raises(ValueError, match="text.csv, line 2: .* is not a number"):
