@@ -1,9 +1,11 @@
 """Chooses how many of a run's last snapshots to average, on selection seeds; writes the average.
 
     python scripts/select_average.py RUN [--sizes 1 5 7 9] [--task coverage] [--map paper]
-        [--episodes 100] [--seed 10000] [--out RUN/average]
+        [--num-robots R] [--max-steps T] [--episodes 100] [--seed 10000] [--out RUN/average]
     e.g.  python scripts/select_average.py outputs/bc/explore_from_cov_perhop8 \\
         --task exploration --sizes 1 5 7 9 13
+    e.g.  python scripts/select_average.py outputs/bc/mission_standin --map paper_full \\
+        --num-robots 10 --max-steps 131 --episodes 20 --seed 100     # the mission's stand-in
 
 ``RUN`` is a behaviour-cloning run trained with ``snapshots=true`` (its ``steps/`` folder). For
 each size ``n``, the mean of the last ``n`` snapshots plays one episode per seed
@@ -35,12 +37,18 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--sizes", type=positive_int, nargs="+", default=[1, 3, 5, 7, 9])
     parser.add_argument("--task", choices=list(TASKS), default="coverage")
     parser.add_argument("--map", default="paper")
+    parser.add_argument("--num-robots", type=positive_int, default=None, help="default: the env's")
+    parser.add_argument("--max-steps", type=positive_int, default=None, help="default: the env's")
     parser.add_argument("--episodes", type=positive_int, default=100)
     parser.add_argument("--seed", type=int, default=10000)
     parser.add_argument("--out", type=Path, default=None, help="default: RUN/average")
     args = parser.parse_args(argv)
     out = args.out or args.run / "average"
     env_kwargs = {"map": args.map, "task": args.task}
+    if args.num_robots is not None:
+        env_kwargs["num_robots"] = args.num_robots
+    if args.max_steps is not None:
+        env_kwargs["max_steps"] = args.max_steps
     seeds = list(range(args.seed, args.seed + args.episodes))
     try:
         from tqdm import tqdm
@@ -55,7 +63,10 @@ def main(argv: list[str] | None = None) -> None:
         )
     except (FileNotFoundError, ValueError) as error:
         raise SystemExit(str(error)) from error
-    print(f"{args.task} on {args.map}, seeds {seeds[0]}..{seeds[-1]}")
+    team = "".join(
+        f", {key} {env_kwargs[key]}" for key in ("num_robots", "max_steps") if key in env_kwargs
+    )
+    print(f"{args.task} on {args.map}{team}, seeds {seeds[0]}..{seeds[-1]}")
     print(f"{'window':<28} {'mean':>7} {'SEM':>6} {'vs best':>16}")
     for result in results:
         diff, sem = result.paired(best)

@@ -125,6 +125,17 @@ def test_cli_writes_the_chosen_average(tmp_path) -> None:
     for key, value in expected.state_dict().items():
         assert torch.equal(model.state_dict()[key], value), key
     assert metadata["selection"]["chosen"] == chosen
+    # a team and an episode length of the selection env's own (the mission's stand-in)
+    team = run_select(
+        str(tmp_path / "run"),
+        *("--sizes", "1", "--map", "city", "--num-robots", "3", "--max-steps", "7"),
+        *("--episodes", "2", "--seed", "3", "--out", str(tmp_path / "team")),
+    )
+    assert team.returncode == 0, team.stderr
+    assert "num_robots 3, max_steps 7" in team.stdout
+    (window,) = (tmp_path / "team" / "windows").iterdir()
+    env = json.loads(window.read_text())["setup"]["env"]
+    assert (env["num_robots"], env["max_steps"]) == (3, 7)
     missing = run_select(str(tmp_path / "nothing"))
     assert missing.returncode != 0 and "no snapshot folder" in missing.stderr
     assert not (tmp_path / "nothing").exists()
