@@ -172,8 +172,7 @@ def compare(
     a = np.array([base[s] for s in seeds], dtype=np.float64)  # (episodes,)
     b = np.array([other[s] for s in seeds], dtype=np.float64)  # (episodes,)
     diff = b - a  # (episodes,)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ratios = np.where(a != 0, b / np.where(a != 0, a, 1.0), math.nan)  # (episodes,)
+    ratios = np.where(a != 0, b / np.where(a != 0, a, 1.0), math.nan)  # (episodes,)
     base_mean, other_mean = float(a.mean()), float(b.mean())
     return PairedComparison(
         base=base_name,
