@@ -42,6 +42,10 @@ class Episode:
         robot_node: ``(T + 1, R)`` waypoints before each step and after the last.
         actions: ``(T, R)`` int8 actions taken.
         fallbacks: Steps on which a robot used the expert's greedy fallback.
+        accept: ``(T, R)`` int8 bit masks of the actions the labelling expert rated as good
+            as ``actions`` (bit ``a`` for action ``a``: every first hop of a shortest path to
+            its next stop, :func:`agents.experts.expert.shortest_moves`), or ``None`` (not
+            recorded; :func:`trajectory_ties` infers them from an expert's own trajectory).
     """
 
     seed: int
@@ -50,6 +54,7 @@ class Episode:
     robot_node: np.ndarray
     actions: np.ndarray
     fallbacks: int = 0
+    accept: np.ndarray | None = None
 
     @property
     def num_steps(self) -> int:
@@ -126,7 +131,7 @@ def _pack(episodes: list[Episode]) -> dict[str, np.ndarray]:
     """Ragged episodes as flat arrays with offsets."""
     nodes = np.cumsum([0] + [e.graph.num_nodes for e in episodes])
     steps = np.cumsum([0] + [e.num_steps for e in episodes])
-    return {
+    arrays = {
         "seed": np.array([e.seed for e in episodes], dtype=np.int64),
         "fallbacks": np.array([e.fallbacks for e in episodes], dtype=np.int64),
         "cell_size": np.array([e.graph.cell_size for e in episodes], dtype=np.float64),
@@ -139,6 +144,9 @@ def _pack(episodes: list[Episode]) -> dict[str, np.ndarray]:
         "robot_node": np.concatenate([e.robot_node for e in episodes]).astype(np.int32),
         "actions": np.concatenate([e.actions for e in episodes]).astype(np.int8),
     }
+    if episodes and all(e.accept is not None for e in episodes):
+        arrays["accept"] = np.concatenate([e.accept for e in episodes]).astype(np.int8)
+    return arrays
 
 
 def _unpack(arrays: dict[str, np.ndarray]) -> list[Episode]:
@@ -160,9 +168,47 @@ def _unpack(arrays: dict[str, np.ndarray]) -> list[Episode]:
                 robot_node=arrays["robot_node"][s0 + i : s1 + i + 1].astype(np.int64),
                 actions=arrays["actions"][s0:s1],
                 fallbacks=int(arrays["fallbacks"][i]),
+                accept=arrays["accept"][s0:s1] if "accept" in arrays else None,
             )
         )
     return episodes
+
+
+def trajectory_ties(episode: Episode) -> np.ndarray:
+    """Bit masks ``(T, R)`` of the actions as good as each recorded one, from the trajectory.
+
+    A robot's next reward is the first later step at which it stands on a point of interest
+    nobody visited before. Where it got there along a shortest path (``j`` steps for a hop
+    distance of ``j``), every first hop of a shortest path to that point arrives as early and
+    is accepted; elsewhere (blocked, waiting, wandering, no reward ahead) only the recorded
+    action is. Meant for an expert's own episodes, whose moves follow shortest paths between
+    its stops; a DAgger episode records the labelling expert's sets instead
+    (:attr:`Episode.accept`), since its trajectory is the learner's.
+    """
+    steps, num_robots = episode.actions.shape
+    accept = (1 << episode.actions.astype(np.int64)).astype(np.int8)  # (T, R)
+    nodes = episode.robot_node  # (T + 1, R)
+    first_visit = np.full(episode.graph.num_nodes, steps + 1, dtype=np.int64)
+    for t in range(steps, -1, -1):  # earliest step each waypoint was stood on
+        first_visit[nodes[t]] = t
+    new_visit = episode.interest[nodes] & (first_visit[nodes] == np.arange(steps + 1)[:, None])
+    distances = episode.graph.hop_distances(np.arange(episode.graph.num_nodes))  # (N, N)
+    neighbors = episode.graph.neighbors
+    for r in range(num_robots):
+        times = np.flatnonzero(new_visit[1:, r]) + 1  # steps at which robot r scores
+        for t in range(steps):
+            later = times[np.searchsorted(times, t, side="right") :]
+            if len(later) == 0:
+                break
+            j, goal, here = later[0] - t, nodes[later[0], r], nodes[t, r]
+            if distances[here, goal] != j:
+                continue
+            nbr = neighbors[here]  # (4,)
+            on_path = (nbr >= 0) & (distances[nbr.clip(min=0), goal] == j - 1)
+            bits = int((on_path * (1 << np.arange(1, 5))).sum())
+            if bits >> int(episode.actions[t, r]) & 1:
+                accept[t, r] = bits
+    return accept
 
 
 def write_shard(path: Path, episodes: list[Episode]) -> None:

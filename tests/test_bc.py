@@ -347,6 +347,10 @@ def test_dagger_can_label_with_a_receding_expert_blind_to_the_clock(tmp_path) ->
     env.reset(seed=episode.seed)
     expert = RoutingExpert(mode="receding", horizon=20, clock=False, max_iterations=30, seed=700)
     assert np.array_equal(expert.act_snapshot(env.snapshot()), episode.actions[0])
+    # the shard keeps every move the expert rated as good as its label (dagger's ties)
+    assert np.array_equal(episode.accept[0], expert.accept)
+    assert episode.accept.shape == episode.actions.shape
+    assert ((episode.accept.astype(np.int64) >> episode.actions) & 1).all()
     for bad, message in [
         ({"expert_mode": "closed"}, "expert_mode"),
         ({"expert_mode": "receding"}, "expert_horizon"),

@@ -54,17 +54,35 @@ def step_toward(graph: SpatialGraph, robot_node: np.ndarray, goals: np.ndarray) 
 
     Ties go to the lowest action slot (east, north, west, south).
     """
-    actions = np.zeros(len(robot_node), dtype=np.int64)
+    return lowest_action(shortest_moves(graph, robot_node, goals))
+
+
+def shortest_moves(graph: SpatialGraph, robot_node: np.ndarray, goals: np.ndarray) -> np.ndarray:
+    """Every action that starts a shortest path to each robot's goal, as a bit mask ``(R,)``.
+
+    Bit ``a`` is set when action ``a`` is one hop along some shortest path; bit 0 (stay) alone
+    when the goal is ``-1``, the robot's own waypoint or out of reach. :func:`step_toward`
+    takes the lowest of them; a plan is worth as much whichever one a robot takes, so they are
+    the labels a learner may match (``dagger.ties``).
+    """
+    mask = np.ones(len(robot_node), dtype=np.int64)  # stay
     moving = np.flatnonzero((goals >= 0) & (goals != robot_node))
     if len(moving) == 0:
-        return actions
+        return mask
     dist = graph.hop_distances(goals[moving])  # (M, N)
     nbr = graph.neighbors[robot_node[moving]]  # (M, 4)
     d = np.where(nbr >= 0, dist[np.arange(len(moving))[:, None], nbr.clip(min=0)], np.inf)
-    best = np.argmin(d, axis=1)
-    ok = np.isfinite(d[np.arange(len(moving)), best])
-    actions[moving[ok]] = best[ok] + 1
-    return actions
+    nearest = d.min(axis=1, keepdims=True)  # (M, 1)
+    on_path = np.isfinite(nearest) & (d == nearest)  # (M, 4)
+    bits = (on_path * (1 << np.arange(1, 5))).sum(axis=1)
+    mask[moving] = np.where(bits > 0, bits, 1)
+    return mask
+
+
+def lowest_action(mask: np.ndarray) -> np.ndarray:
+    """The lowest action of each bit mask of :func:`shortest_moves`, ``(R,)`` int64."""
+    mask = np.asarray(mask, dtype=np.int64)
+    return np.log2(mask & -mask).astype(np.int64)
 
 
 def greedy_goals(snapshot: CoverageSnapshot, robots: np.ndarray, limit: float) -> np.ndarray:
@@ -144,6 +162,7 @@ class RoutingExpert:
             self.seed = seed
         self._routes: list[list[int]] | None = None  # waypoint stops per robot
         self._expected: np.ndarray | None = None
+        self.accept = np.zeros(0, dtype=np.int64)  # set by each act_snapshot
         self.counts = Counter()
 
     # ------------------------------------------------------------------ planning
@@ -223,7 +242,9 @@ class RoutingExpert:
         fallback = np.flatnonzero(goals < 0)
         limit = np.inf if self.fallback_reach is None else self.fallback_reach
         goals[fallback] = greedy_goals(snapshot, fallback, limit)
-        actions = step_toward(snapshot.graph, snapshot.robot_node, goals)
+        #: (R,) bit masks of the actions as good as ``actions`` (:func:`shortest_moves`)
+        self.accept = shortest_moves(snapshot.graph, snapshot.robot_node, goals)
+        actions = lowest_action(self.accept)
         self.counts["fallback_steps"] += len(fallback)
         self.info = {"fallback": len(fallback), "replanned": replanned}
         targets = np.where(

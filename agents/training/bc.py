@@ -33,6 +33,7 @@ with the next round, as one longer run would have.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from dataclasses import dataclass, field
@@ -45,12 +46,20 @@ from torch.nn import functional
 
 from agents import configuration
 from agents.cli import write_text_atomic
-from agents.datasets import SHARD_PATTERN, Episode, load_dataset, read_shard, write_shard
+from agents.datasets import (
+    SHARD_PATTERN,
+    Episode,
+    load_dataset,
+    read_shard,
+    trajectory_ties,
+    write_shard,
+)
 from agents.evaluation import evaluate
 from agents.models.gnn import AggregationGNN, GNNConfig, action_logits
 from agents.models.policy import EnsemblePolicy, GNNPolicy, load_model, save_model
 from agents.training.data import GraphTable, collate_states, episode_transitions
 from agents.training.runs import LOGGERS, check_same_run, make_logger
+from marl_cover.ego import NUM_ACTIONS
 from marl_cover.env import CoverageEnv
 
 logger = logging.getLogger(__name__)
@@ -159,6 +168,9 @@ class BCConfig:
     threads: int = 1
     logger: str = "csv"
     progress: bool = True
+    # train on the set of actions as good as each label (batch_loss): the dataset's from its
+    # trajectories (trajectory_ties), the DAgger states' as their expert recorded them
+    ties: bool = False
     dagger: DaggerConfig = field(default_factory=DaggerConfig)
 
     def __post_init__(self) -> None:
@@ -231,29 +243,41 @@ def batch_loss(
     entropy_coef: float = 0.0,
     max_steps: int | None = None,
     extra: Part | None = None,
+    ties: bool = False,
 ) -> tuple[torch.Tensor, dict[str, float]]:
     """Mean cross-entropy of the expert's actions over every robot of a batch of transitions
     (``max_steps``: actions per episode, for a model that reads the time), and of the ``extra``
-    transitions collated apart (DAgger states of another map or team size)."""
+    transitions collated apart (DAgger states of another map or team size).
+
+    With ``ties`` the loss is instead the negative log-probability of the set of actions the
+    expert rated as good as its label (the transitions' ``accept`` bit masks): a learner is not
+    pushed toward the expert's tie-break between equally short paths. The metrics hold both,
+    and the accuracy of the argmax against the label and against the set."""
     parts = [Part(batch, table, max_steps)] + ([] if extra is None else [extra])
-    logits, targets = [], []
+    logits, targets, accepts = [], [], []
     for part in parts:
         nodes, edge_index, edge_attr, action_edges = collate_states(
             part.batch, part.table, model.config.time_horizon, part.max_steps
         )
         logits.append(action_logits(model, (nodes, edge_index, edge_attr), action_edges))
         targets.append(part.batch["action"].reshape(-1))
+        accepts.append(part.batch["accept"].reshape(-1))
     logits, target = torch.cat(logits), torch.cat(targets)  # (B*R, 5), (B*R,)
+    accepted = (torch.cat(accepts).unsqueeze(-1) >> torch.arange(NUM_ACTIONS)) & 1  # (B*R, 5)
     cross_entropy = functional.cross_entropy(logits, target)
     log_probs = torch.log_softmax(logits, dim=-1)
+    # -log of the probability of the accepted set (the label alone where there are no ties)
+    set_nll = -torch.logsumexp(log_probs.masked_fill(accepted == 0, -math.inf), dim=-1).mean()
     probs = log_probs.exp()
     entropy = -(probs * log_probs.masked_fill(probs == 0, 0.0)).sum(-1).mean()
-    loss = cross_entropy - entropy_coef * entropy
-    accuracy = (logits.argmax(-1) == target).float().mean()
+    loss = (set_nll if ties else cross_entropy) - entropy_coef * entropy
+    choice = logits.argmax(-1, keepdim=True)
     return loss, {
         "cross_entropy": float(cross_entropy.detach()),
+        "set_nll": float(set_nll.detach()),
         "entropy": float(entropy.detach()),
-        "accuracy": float(accuracy),
+        "accuracy": float((choice.squeeze(-1) == target).float().mean()),
+        "set_accuracy": float(accepted.gather(-1, choice).float().mean()),
     }
 
 
@@ -265,9 +289,10 @@ def validate(
     chunk: int = 512,
     max_steps: int | None = None,
 ) -> dict:
-    """Cross-entropy and accuracy over all validation transitions."""
+    """Cross-entropy and accuracy over all validation transitions, against the labels and
+    against the sets of equally good actions (``set_nll``, ``set_accuracy``)."""
     model.eval()
-    totals = {"cross_entropy": 0.0, "accuracy": 0.0}
+    totals = {"cross_entropy": 0.0, "accuracy": 0.0, "set_nll": 0.0, "set_accuracy": 0.0}
     for start in range(0, len(data), chunk):
         batch = data[start : start + chunk]
         _, metrics = batch_loss(model, batch, table, max_steps=max_steps)
@@ -306,13 +331,15 @@ def dagger_round(
         rng = np.random.default_rng(seed)
         env.reset(seed=seed)
         start = env.snapshot()
-        positions, labels = [start.robot_node.copy()], []
+        positions, labels, accepted = [start.robot_node.copy()], [], []
         while env.agents:
             state = env.state()
             if expert is None:
                 label = teacher.act_state(state)
+                accepted.append(1 << label)
             else:
                 label = expert.act_snapshot(env.snapshot())
+                accepted.append(expert.accept.copy())
             learner = policy.act_state(state)
             executed = np.where(rng.random(len(label)) < beta, label, learner)
             labels.append(label)
@@ -326,10 +353,18 @@ def dagger_round(
                 robot_node=np.array(positions, dtype=np.int64),
                 actions=np.array(labels, dtype=np.int8),
                 fallbacks=0 if expert is None else int(expert.counts.get("fallback_steps", 0)),
+                accept=np.array(accepted, dtype=np.int8),
             )
         )
     model.train()
     return episodes
+
+
+def _with_ties(episode: Episode) -> Episode:
+    """``episode`` with its tie sets (:func:`trajectory_ties`) unless it records its own."""
+    if episode.accept is not None:
+        return episode
+    return dataclasses.replace(episode, accept=trajectory_ties(episode))
 
 
 def _routing_expert(dagger: DaggerConfig, seed: int) -> Any:
@@ -411,6 +446,8 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
     torch.set_num_threads(config.threads)
 
     train, val = split_episodes(config)
+    if config.ties:  # the expert's own trajectories show which other moves were as good
+        train, val = ([_with_ties(e) for e in part] for part in (train, val))
     env = CoverageEnv(**config.env)
     max_nodes = max([e.graph.num_nodes for e in train + val] + [env.max_waypoints])
     dagger_shards = [out / "dagger" / SHARD_PATTERN.format(k) for k in range(config.dagger.rounds)]
@@ -517,7 +554,13 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
             group["lr"] = config.lr * config.lr_decay ** (phase_step / config.lr_decay_every)
         batch, extra = next_batch()
         loss, metrics = batch_loss(
-            model, batch, table, config.entropy_coef, env.config.max_steps, extra=extra
+            model,
+            batch,
+            table,
+            config.entropy_coef,
+            env.config.max_steps,
+            extra=extra,
+            ties=config.ties,
         )
         optimizer.zero_grad()
         loss.backward()

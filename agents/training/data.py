@@ -73,6 +73,9 @@ def episode_transitions(
 ) -> TensorDict:
     """Every step of ``episodes`` as transitions; episode ``i`` gets index ``first_index + i``.
 
+    Each transition holds the label ``action (R,)`` and ``accept (R,)``, the bit masks of the
+    actions as good as it (:attr:`Episode.accept`; the label's bit alone where not recorded).
+
     With ``sensor_range`` (exploration) each transition also holds what the team had
     discovered and the frontier.
     """
@@ -80,7 +83,7 @@ def episode_transitions(
     if sensor_range is not None:
         names += ["discovered", "frontier"]
     fields: dict[str, list[np.ndarray]] = {name: [] for name in names}
-    actions = []
+    actions, accepted = [], []
     for i, episode in enumerate(episodes):
         steps, n = episode.num_steps, episode.graph.num_nodes
         visited = np.zeros(n, dtype=bool)
@@ -102,8 +105,11 @@ def episode_transitions(
         fields["robot_node"].append(episode.robot_node[:steps].astype(np.int64))
         fields["interest"].append(interest)
         actions.append(episode.actions.astype(np.int64))
+        accept = episode.accept if episode.accept is not None else 1 << actions[-1]
+        accepted.append(np.asarray(accept, dtype=np.int64))
     data = {k: torch.from_numpy(np.concatenate(v)) for k, v in fields.items()}
     data["action"] = torch.from_numpy(np.concatenate(actions))
+    data["accept"] = torch.from_numpy(np.concatenate(accepted))
     return TensorDict(data, batch_size=[len(data["episode"])])
 
 
