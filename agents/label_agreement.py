@@ -29,16 +29,32 @@ class Agreement:
         agreed: Robot-states whose relabelled action equals the recorded one.
         total: Robot-states compared.
         by_step: Step bucket start (``bucket * (t // bucket)``) -> ``[agreed, total]``.
+        in_set: Robot-states whose relabelled action is in the recorded set of equally good
+            actions (``Episode.accept``; equals ``agreed`` for episodes without sets).
+        tied: Robot-states whose recorded set holds more than the label.
     """
 
     agreed: int
     total: int
     by_step: dict[int, list[int]] = field(default_factory=dict)
+    in_set: int = 0
+    tied: int = 0
 
     @property
     def fraction(self) -> float:
         """``agreed / total`` (NaN when nothing was compared)."""
         return self.agreed / self.total if self.total else math.nan
+
+    @property
+    def set_fraction(self) -> float:
+        """Share of robot-states whose relabelled action is one the recorded expert rated as
+        good as its label (:attr:`Episode.accept`; the label alone where not recorded)."""
+        return self.in_set / self.total if self.total else math.nan
+
+    @property
+    def tied_fraction(self) -> float:
+        """Share of robot-states whose recorded label had an equally good alternative."""
+        return self.tied / self.total if self.total else math.nan
 
 
 def label_agreement(
@@ -67,23 +83,28 @@ def label_agreement(
             settings), naming its seed and step.
     """
     by_step: dict[int, list[int]] = {}
+    in_set = tied = 0
     for done, episode in enumerate(episodes, start=1):
         count = min(states_per_episode, episode.num_steps)
         steps = np.sort(rng.choice(episode.num_steps, size=count, replace=False))
+        moves = recorded_moves(episode)  # (T, R)
+        labels = episode.actions.astype(np.int64)
+        accept = labels_or_sets(episode)
         env.reset(seed=episode.seed)
         step = 0
         for target in steps.tolist():
             while step < target:
-                env.step(
-                    dict(zip(env.possible_agents, episode.actions[step].tolist(), strict=True))
-                )
+                env.step(dict(zip(env.possible_agents, moves[step].tolist(), strict=True)))
                 step += 1
             if not np.array_equal(env.snapshot().robot_node, episode.robot_node[step]):
                 raise ValueError(
                     f"episode seed {episode.seed} left its recorded positions at step {step}: "
                     "is the environment configured as when it was recorded?"
                 )
-            same = np.asarray(relabel(env, step)) == episode.actions[step]
+            action = np.asarray(relabel(env, step), dtype=np.int64)
+            same = action == labels[step]
+            in_set += int(((accept[step] >> action) & 1).sum())
+            tied += int((accept[step] != 1 << labels[step]).sum())
             counts = by_step.setdefault(bucket * (step // bucket), [0, 0])
             counts[0] += int(same.sum())
             counts[1] += len(same)
@@ -91,7 +112,31 @@ def label_agreement(
             progress(done)
     agreed = sum(counts[0] for counts in by_step.values())
     total = sum(counts[1] for counts in by_step.values())
-    return Agreement(agreed, total, dict(sorted(by_step.items())))
+    return Agreement(agreed, total, dict(sorted(by_step.items())), in_set, tied)
+
+
+def recorded_moves(episode: Episode) -> np.ndarray:
+    """The action that carries each robot from one recorded waypoint to the next, ``(T, R)``
+    (0 where it stayed). Replaying them gives the recorded states whether the labels were
+    carried out (an expert's episode) or not (DAgger: the learner moved, the expert labelled).
+
+    Raises:
+        ValueError: two recorded waypoints are not neighbours, naming the episode and step.
+    """
+    here, there = episode.robot_node[:-1], episode.robot_node[1:]  # (T, R)
+    slots = episode.graph.neighbors[here] == there[..., None]  # (T, R, 4)
+    moved = slots.any(-1)
+    if not (moved | (here == there)).all():
+        step = int(np.flatnonzero(~(moved | (here == there)).all(-1))[0])
+        raise ValueError(f"episode seed {episode.seed} jumps between waypoints at step {step}")
+    return np.where(moved, slots.argmax(-1) + 1, 0)
+
+
+def labels_or_sets(episode: Episode) -> np.ndarray:
+    """Bit masks ``(T, R)`` of the recorded sets of equally good actions, or of the labels."""
+    if episode.accept is not None:
+        return episode.accept.astype(np.int64)
+    return 1 << episode.actions.astype(np.int64)
 
 
 def with_steps_left(snapshot: CoverageSnapshot, steps_left: int) -> CoverageSnapshot:

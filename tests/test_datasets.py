@@ -152,6 +152,39 @@ def test_label_agreement_replays_recorded_states() -> None:
         label_agreement(other_env, episodes, greedy.relabel, 4, np.random.default_rng(0))
 
 
+def test_label_agreement_replays_dagger_states_and_counts_the_tie_sets() -> None:
+    """A DAgger episode's labels are not the moves that were made: the states replay from the
+    recorded waypoints, and a relabelling inside the recorded set of equal actions counts."""
+    import dataclasses
+
+    from agents.label_agreement import label_agreement, recorded_moves
+
+    env = marl_cover.parallel_env(city_size=100, num_robots=3, hops=6, max_steps=12)
+    greedy = _CentralGreedy(6)
+    (played,) = [record_episode(env, greedy, 4)]
+    moves = recorded_moves(played)
+    assert moves.shape == played.actions.shape
+    labels = (moves + 1) % 5  # never the move
+    tied = dataclasses.replace(played, actions=labels.astype(np.int8), accept=(1 << labels) | 1)
+    # relabelling with the moves: never the label, inside the set exactly where it stayed
+    result = label_agreement(
+        env, [tied], lambda env, step: moves[step], 50, np.random.default_rng(0)
+    )
+    assert (result.agreed, result.total) == (0, moves.size)
+    assert result.in_set == int((moves == 0).sum()) and result.tied == int((labels != 0).sum())
+    # relabelling with the labels: all agree, and all lie in the sets
+    same = label_agreement(
+        env, [tied], lambda env, step: labels[step], 50, np.random.default_rng(0)
+    )
+    assert same.agreed == same.in_set == moves.size and same.set_fraction == 1.0
+    # a recorded jump (not a neighbour) is named
+    jump = played.robot_node.copy()
+    far = played.graph.hop_distances(jump[2, :1])[0] > 1  # (N,)
+    jump[3, 0] = int(np.flatnonzero(far)[0])
+    with pytest.raises(ValueError, match="episode seed 4 jumps between waypoints at step 2"):
+        recorded_moves(dataclasses.replace(played, robot_node=jump))
+
+
 def test_a_clock_blind_snapshot_plans_for_the_steps_it_is_told() -> None:
     from agents.experts.problem import build_problem
     from agents.label_agreement import with_steps_left
@@ -215,3 +248,16 @@ def test_label_agreement_script(tmp_path) -> None:
     assert gnn["relabel"] == "gnn" and gnn["checkpoint"].endswith("bc/coverage_gnn.pt")
     assert gnn["episodes"] == record["episodes"] and gnn["total"] == record["total"]
     assert [b[1] for b in gnn["by_step"].values()] == [b[1] for b in buckets]
+    # Episodes from a folder of shards, replayed in the config's env, relabelled by the
+    # receding expert: the dataset records no tie sets, so the set agreement is the agreement.
+    config.write_text(
+        f"dataset: {data}\nenv: {{map: city, city_size: 120, max_steps: 15, hops: 6}}\n"
+    )
+    shards_out = tmp_path / "shards.json"
+    done = run(
+        "--shards", str(data), "--episodes", "1", "--receding", "6", "--out", str(shards_out)
+    )
+    shards = json.loads(shards_out.read_text())
+    assert shards["dataset"] == str(data) and shards["receding"] == 6
+    assert shards["total"] == 3 * 4 and shards["in_set"] == shards["agreed"]
+    assert shards["tied"] == 0 and "in set" in done.stdout
