@@ -10,6 +10,9 @@
         dagger.expert_mode=receding dagger.expert_horizon=19 dagger.expert_clock=false \
         dagger.env.map=paper_full dagger.env.num_robots=10 dagger.env.max_steps=131 \
         select_env.map=paper_full select_env.num_robots=10 select_env.max_steps=131 select_seed=100
+    python scripts/train_bc.py init=MODEL.pt steps=0 dagger.rounds=4 dagger.fraction=0.5 \
+        dagger.expert_mode=receding dagger.expert_horizon=19 dagger.expert_clock=false \
+        ties=true     # learn the expert's set of equally short moves, not its tie-break
 
 Re-running with the same ``out`` resumes from ``out/checkpoint.pt`` (with more
 ``dagger.rounds``, a finished run goes on with the next round). Any key of
