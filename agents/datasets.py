@@ -56,6 +56,13 @@ class Episode:
     fallbacks: int = 0
     accept: np.ndarray | None = None
 
+    def label_sets(self) -> np.ndarray:
+        """Bit masks ``(T, R)`` int64 of the actions as good as each label: :attr:`accept`
+        where recorded, else the label's bit alone."""
+        if self.accept is not None:
+            return self.accept.astype(np.int64)
+        return 1 << self.actions.astype(np.int64)
+
     @property
     def num_steps(self) -> int:
         return int(self.actions.shape[0])
@@ -186,29 +193,28 @@ def trajectory_ties(episode: Episode) -> np.ndarray:
     (:attr:`Episode.accept`), since its trajectory is the learner's.
     """
     steps, num_robots = episode.actions.shape
-    accept = (1 << episode.actions.astype(np.int64)).astype(np.int8)  # (T, R)
     nodes = episode.robot_node  # (T + 1, R)
     first_visit = np.full(episode.graph.num_nodes, steps + 1, dtype=np.int64)
     for t in range(steps, -1, -1):  # earliest step each waypoint was stood on
         first_visit[nodes[t]] = t
     new_visit = episode.interest[nodes] & (first_visit[nodes] == np.arange(steps + 1)[:, None])
+    # the next step after t at which robot r scores (-1: none), (T, R)
+    scores_at = np.full((steps, num_robots), -1, dtype=np.int64)
+    upcoming = np.full(num_robots, -1, dtype=np.int64)
+    for t in range(steps - 1, -1, -1):
+        upcoming = np.where(new_visit[t + 1], t + 1, upcoming)
+        scores_at[t] = upcoming
+    robots = np.arange(num_robots)
+    here = nodes[:-1]  # (T, R)
+    goal = nodes[scores_at.clip(min=0), robots]  # (T, R)
+    ahead = scores_at - np.arange(steps)[:, None]  # (T, R) steps to get there
     distances = episode.graph.hop_distances(np.arange(episode.graph.num_nodes))  # (N, N)
-    neighbors = episode.graph.neighbors
-    for r in range(num_robots):
-        times = np.flatnonzero(new_visit[1:, r]) + 1  # steps at which robot r scores
-        for t in range(steps):
-            later = times[np.searchsorted(times, t, side="right") :]
-            if len(later) == 0:
-                break
-            j, goal, here = later[0] - t, nodes[later[0], r], nodes[t, r]
-            if distances[here, goal] != j:
-                continue
-            nbr = neighbors[here]  # (4,)
-            on_path = (nbr >= 0) & (distances[nbr.clip(min=0), goal] == j - 1)
-            bits = int((on_path * (1 << np.arange(1, 5))).sum())
-            if bits >> int(episode.actions[t, r]) & 1:
-                accept[t, r] = bits
-    return accept
+    nbr = episode.graph.neighbors[here]  # (T, R, 4)
+    on_path = (nbr >= 0) & (distances[nbr.clip(min=0), goal[..., None]] == ahead[..., None] - 1)
+    bits = (on_path * (1 << np.arange(1, 5))).sum(-1)  # (T, R)
+    labels = episode.actions.astype(np.int64)
+    keep = (scores_at >= 0) & (distances[here, goal] == ahead) & ((bits >> labels) & 1 == 1)
+    return np.where(keep, bits, 1 << labels).astype(np.int8)
 
 
 def write_shard(path: Path, episodes: list[Episode]) -> None:

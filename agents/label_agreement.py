@@ -89,7 +89,7 @@ def label_agreement(
         steps = np.sort(rng.choice(episode.num_steps, size=count, replace=False))
         moves = recorded_moves(episode)  # (T, R)
         labels = episode.actions.astype(np.int64)
-        accept = labels_or_sets(episode)
+        accept = episode.label_sets()  # (T, R)
         env.reset(seed=episode.seed)
         step = 0
         for target in steps.tolist():
@@ -126,17 +126,11 @@ def recorded_moves(episode: Episode) -> np.ndarray:
     here, there = episode.robot_node[:-1], episode.robot_node[1:]  # (T, R)
     slots = episode.graph.neighbors[here] == there[..., None]  # (T, R, 4)
     moved = slots.any(-1)
-    if not (moved | (here == there)).all():
-        step = int(np.flatnonzero(~(moved | (here == there)).all(-1))[0])
+    legal = (moved | (here == there)).all(-1)  # (T,)
+    if not legal.all():
+        step = int(np.flatnonzero(~legal)[0])
         raise ValueError(f"episode seed {episode.seed} jumps between waypoints at step {step}")
     return np.where(moved, slots.argmax(-1) + 1, 0)
-
-
-def labels_or_sets(episode: Episode) -> np.ndarray:
-    """Bit masks ``(T, R)`` of the recorded sets of equally good actions, or of the labels."""
-    if episode.accept is not None:
-        return episode.accept.astype(np.int64)
-    return 1 << episode.actions.astype(np.int64)
 
 
 def with_steps_left(snapshot: CoverageSnapshot, steps_left: int) -> CoverageSnapshot:

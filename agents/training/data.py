@@ -105,8 +105,7 @@ def episode_transitions(
         fields["robot_node"].append(episode.robot_node[:steps].astype(np.int64))
         fields["interest"].append(interest)
         actions.append(episode.actions.astype(np.int64))
-        accept = episode.accept if episode.accept is not None else 1 << actions[-1]
-        accepted.append(np.asarray(accept, dtype=np.int64))
+        accepted.append(episode.label_sets())
     data = {k: torch.from_numpy(np.concatenate(v)) for k, v in fields.items()}
     data["action"] = torch.from_numpy(np.concatenate(actions))
     data["accept"] = torch.from_numpy(np.concatenate(accepted))
