@@ -2,9 +2,20 @@
 
 from __future__ import annotations
 
+import contextlib
+import io
+import os
+import runpy
+import subprocess
+import sys
+import traceback
+from pathlib import Path
+
 import numpy as np
 
 from marl_cover.graph import SpatialGraph
+
+ROOT = Path(__file__).resolve().parent.parent
 
 
 def random_grid_graph(
@@ -16,3 +27,47 @@ def random_grid_graph(
     occupied = rng.random((rows, cols)) > density
     occupied[rng.integers(rows), rng.integers(cols)] = False
     return graph_from_occupancy(occupied, cell_size=5.0)
+
+
+def run_script(script: str, *args: str) -> subprocess.CompletedProcess:
+    """``python scripts/<script> <args>`` from the repository root, run in this process.
+
+    The script runs as ``__main__`` (its command-line entry, argument parsing and exit codes
+    included) without a new interpreter: no second import of torch and TorchRL, about 5 s
+    a call on the CI machines. Use a real subprocess where the script starts worker
+    processes.
+
+    Args:
+        script: File name under ``scripts/``.
+        *args: Its command-line arguments.
+
+    Returns:
+        What ``subprocess.run(..., capture_output=True, text=True)`` returns: the exit code
+        (``SystemExit``'s, or 1 and the traceback in ``stderr`` for an uncaught exception),
+        ``stdout`` and ``stderr``.
+    """
+    path = ROOT / "scripts" / script
+    stdout, stderr = io.StringIO(), io.StringIO()
+    saved_argv, saved_cwd, saved_path = sys.argv, os.getcwd(), list(sys.path)
+    code = 0
+    try:
+        os.chdir(ROOT)
+        sys.argv = [str(path), *args]
+        with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
+            try:
+                runpy.run_path(str(path), run_name="__main__")
+            except SystemExit as exit_:
+                if isinstance(exit_.code, int):
+                    code = exit_.code
+                elif exit_.code is not None:  # sys.exit("message"): printed, status 1
+                    print(exit_.code, file=sys.stderr)
+                    code = 1
+            except Exception:  # noqa: BLE001 (the process would print it and exit 1)
+                traceback.print_exc()
+                code = 1
+    finally:
+        sys.argv, sys.path[:] = saved_argv, saved_path
+        os.chdir(saved_cwd)
+    return subprocess.CompletedProcess(
+        [sys.executable, str(path), *args], code, stdout.getvalue(), stderr.getvalue()
+    )

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 import torch
+from helpers import run_script
 
 import marl_cover
 from agents import averaging
@@ -101,10 +101,7 @@ def test_ties_go_to_the_larger_window(tmp_path, monkeypatch) -> None:
 
 def run_select(*args: str) -> subprocess.CompletedProcess:
     """``scripts/select_average.py`` with ``args``."""
-    script = str(ROOT / "scripts" / "select_average.py")
-    return subprocess.run(
-        [sys.executable, script, *args], capture_output=True, text=True, cwd=ROOT, timeout=300
-    )
+    return run_script("select_average.py", *args)
 
 
 def test_cli_writes_the_chosen_average(tmp_path) -> None:

@@ -479,15 +479,11 @@ def test_dagger_fraction_fixes_the_share_of_learner_states_in_a_batch(
         assert torch.equal(a, b)
 
     import json
-    import subprocess
-    import sys
-    from pathlib import Path
 
-    root = Path(__file__).resolve().parent.parent
+    from helpers import run_script
+
     small_dataset(tmp_path / "data")
     command = [
-        sys.executable,
-        str(root / "scripts" / "train_bc.py"),
         f"dataset={tmp_path / 'data'}",
         f"out={tmp_path / 'run'}",
         "model.hops=2",
@@ -499,14 +495,12 @@ def test_dagger_fraction_fixes_the_share_of_learner_states_in_a_batch(
         "env.city_size=90",
         "progress=false",
     ]
-    result = subprocess.run(command, capture_output=True, text=True, cwd=root, timeout=300)
+    result = run_script("train_bc.py", *command)
     assert result.returncode == 0, result.stderr
     assert json.loads(result.stdout)["step"] == 20
     config = (tmp_path / "run" / "config.yaml").read_text()
     assert "kind: nonlinear" in config and "hops: 2" in config  # preset + override
-    bad = subprocess.run(
-        [*command[:2], "model.depth=3"], capture_output=True, text=True, cwd=root, timeout=300
-    )
+    bad = run_script("train_bc.py", command[0], "model.depth=3")
     assert bad.returncode != 0 and "depth" in bad.stderr
 
 

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import run_script
 
 import marl_cover
 from agents.datasets import Episode, load_dataset, read_shard, record_episode, write_shard
@@ -216,16 +217,9 @@ def test_label_agreement_script(tmp_path) -> None:
     config = tmp_path / "bc.yaml"
     config.write_text(f"dataset: {data}\nholdout_seeds: [100, 100]\nval_fraction: 0.5\n")
     out = tmp_path / "agreement.json"
-    command = [sys.executable, str(ROOT / "scripts" / "label_agreement.py"), "--config"]
 
     def run(*args: str) -> subprocess.CompletedProcess:
-        done = subprocess.run(
-            [*command, str(config), "--states", "3", *args],
-            capture_output=True,
-            text=True,
-            cwd=ROOT,
-            timeout=600,
-        )
+        done = run_script("label_agreement.py", "--config", str(config), "--states", "3", *args)
         assert done.returncode == 0, done.stderr
         return done
 

@@ -2,13 +2,8 @@
 
 from __future__ import annotations
 
-import subprocess
-import sys
-from pathlib import Path
-
 import pytest
-
-ROOT = Path(__file__).resolve().parent.parent
+from helpers import run_script
 
 
 @pytest.mark.parametrize(
@@ -22,10 +17,9 @@ def test_demo_prints_the_comparison_and_writes_a_gif(tmp_path, task, experts, gi
     pytest.importorskip("torch")
     pytest.importorskip("pyvrp")
     pytest.importorskip("matplotlib")
-    result = subprocess.run(
-        [
-            sys.executable,
-            str(ROOT / "scripts" / "demo.py"),
+    result = run_script(
+        "demo.py",
+        *[
             "--task",
             task,
             "--episodes",
@@ -37,10 +31,6 @@ def test_demo_prints_the_comparison_and_writes_a_gif(tmp_path, task, experts, gi
             "--out",
             str(tmp_path),
         ],
-        capture_output=True,
-        text=True,
-        cwd=ROOT,
-        timeout=300,
     )
     assert result.returncode == 0, result.stderr
     rows = [line for line in result.stdout.splitlines() if "+-" in line]

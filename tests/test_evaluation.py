@@ -4,16 +4,14 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
+from helpers import run_script
 
 import marl_cover
 from agents.evaluation import EpisodeResult, evaluate, summarize
 from agents.greedy import CentralizedGreedyPolicy, GreedyPolicy
-
-ROOT = Path(__file__).resolve().parent.parent
 
 
 def test_summary_statistics() -> None:
@@ -37,13 +35,7 @@ def test_paired_seeds_give_paired_results() -> None:
 
 
 def run_cli(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, str(ROOT / "scripts" / "evaluate.py"), *args],
-        capture_output=True,
-        text=True,
-        cwd=ROOT,
-        timeout=300,
-    )
+    return run_script("evaluate.py", *args)
 
 
 def test_cli_writes_json_and_csv(tmp_path) -> None:
@@ -98,8 +90,6 @@ def test_cli_names_bad_values(argument: str, message: str) -> None:
 
 def test_reproduce_paper_resumes_and_prints_the_table(tmp_path, paper_map_available) -> None:
     command = [
-        sys.executable,
-        str(ROOT / "scripts" / "reproduce_paper.py"),
         "--methods",
         "greedy",
         "--hops",
@@ -109,12 +99,12 @@ def test_reproduce_paper_resumes_and_prints_the_table(tmp_path, paper_map_availa
         "--out",
         str(tmp_path),
     ]
-    first = subprocess.run(command, capture_output=True, text=True, cwd=ROOT, timeout=300)
+    first = run_script("reproduce_paper.py", *command)
     assert first.returncode == 0, first.stderr
     assert "done greedy K=3" in first.stdout
     record = json.loads((tmp_path / "greedy_K3.json").read_text())
     assert set(record) >= {"T50", "T49"}
-    second = subprocess.run(command, capture_output=True, text=True, cwd=ROOT, timeout=300)
+    second = run_script("reproduce_paper.py", *command)
     assert "done greedy" not in second.stdout  # resumed: nothing left to run
     from agents.paper import PAPER_CSV
 
@@ -265,19 +255,10 @@ def test_compare_script_prints_and_writes_the_table(tmp_path: Path) -> None:
     base = write_rewards(tmp_path / "greedy.csv", {0: 10.0, 1: 20.0})
     other = write_rewards(tmp_path / "gnn.csv", {0: 13.0, 1: 21.0})
     out = tmp_path / "cmp.json"
-    script = str(ROOT / "scripts" / "compare.py")
-    done = subprocess.run(
-        [sys.executable, script, str(base), str(other), "--out", str(out)],
-        capture_output=True,
-        text=True,
-        check=True,
-    )
+    done = run_script("compare.py", str(base), str(other), "--out", str(out))
+    assert done.returncode == 0, done.stderr
     assert "+2.00 +- 1.00" in done.stdout and "1.133" in done.stdout
     assert "1.175 +- 0.125" in done.stdout  # per-seed ratios 1.3 and 1.05
     assert json.loads(out.read_text())[0]["difference"] == 2.0
-    bad = subprocess.run(
-        [sys.executable, script, str(base), str(tmp_path / "missing.csv")],
-        capture_output=True,
-        text=True,
-    )
+    bad = run_script("compare.py", str(base), str(tmp_path / "missing.csv"))
     assert bad.returncode == 1 and "missing.csv" in bad.stderr

@@ -14,6 +14,8 @@ import pytest
 torch = pytest.importorskip("torch")
 pytest.importorskip("torchrl")
 
+from helpers import run_script  # noqa: E402
+
 from agents import configuration  # noqa: E402
 from agents.batched_env import BatchedCoverageEnv  # noqa: E402
 from agents.models.gnn import AggregationGNN, GNNConfig  # noqa: E402
@@ -251,12 +253,13 @@ def test_train_mappo_script_smoke_and_resume(tmp_path: Path) -> None:
     for name in ("config.yaml", "checkpoint.pt", "best.pt", "model.pt", "curve.json"):
         assert (tmp_path / "smoke" / name).is_file(), name
     assert list((tmp_path / "smoke" / "log").rglob("*.csv"))
+    # Resumed in this process (the command line itself ran above).
     command[2] = "collector.n_iters=3"
-    done = subprocess.run(command, capture_output=True, text=True, env=env, check=False)
+    done = run_script("train_mappo.py", *command[2:])
     assert done.returncode == 0, done.stderr[-3000:]
     curve = json.loads((tmp_path / "smoke" / "curve.json").read_text())
     assert [row["iteration"] for row in curve] == [0, 1, 2, 3]  # 0: the untrained policy
-    bad = subprocess.run([*command, "loss.gama=0.9"], capture_output=True, text=True, env=env)
+    bad = run_script("train_mappo.py", *command[2:], "loss.gama=0.9")
     assert bad.returncode != 0 and "gama" in bad.stderr
 
 

@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import run_script
 
 from agents.experts.expert import RoutingExpert
 from agents.greedy import CentralizedGreedyPolicy, GreedyPolicy
@@ -107,8 +106,6 @@ def test_mission_config_rejects_unknown_methods_and_keys() -> None:
 def test_run_mission_script(tmp_path: Path) -> None:
     out = tmp_path / "mission"
     args = [
-        sys.executable,
-        str(ROOT / "scripts/run_mission.py"),
         "map=city",
         "num_robots=3",
         "hops=6",
@@ -118,7 +115,7 @@ def test_run_mission_script(tmp_path: Path) -> None:
         f"out={out}",
         "frame_every=3.0",
     ]
-    done = subprocess.run(args, capture_output=True, text=True, cwd=ROOT, timeout=300)
+    done = run_script("run_mission.py", *args)
     assert done.returncode == 0, done.stderr[-2000:]
     summary = json.loads((out / "mission.json").read_text())
     assert set(summary["methods"]) == {"greedy", "gnn"} and summary["seeds"] == [0, 1]
@@ -127,17 +124,15 @@ def test_run_mission_script(tmp_path: Path) -> None:
     assert (out / "mission.png").stat().st_size > 0
     assert (out / "mission_gnn.gif").read_bytes()[:3] == b"GIF"
     # A second run reads the missions back instead of flying them again.
-    again = subprocess.run(args, capture_output=True, text=True, cwd=ROOT, timeout=300)
+    again = run_script("run_mission.py", *args)
     assert again.returncode == 0 and "seed" not in again.stdout.split("points of interest")[0]
     # Another model under the same out= folder is an error that names the run and the change.
     other = args + ["checkpoint=agents/models/shipped/bc/coverage_gnn.pt"]
-    refused = subprocess.run(other, capture_output=True, text=True, cwd=ROOT, timeout=300)
+    refused = run_script("run_mission.py", *other)
     assert refused.returncode != 0
     assert "gnn_0.json was made under another setup" in refused.stderr
     assert "model_sha256" in refused.stderr
     # A bad override ends the script with one line naming it, before anything flies.
-    bad = subprocess.run(
-        args + ["seeds=ten"], capture_output=True, text=True, cwd=ROOT, timeout=300
-    )
+    bad = run_script("run_mission.py", *args, "seeds=ten")
     assert bad.returncode != 0 and "Traceback" not in bad.stderr
     assert bad.stderr.strip().endswith("MissionConfig.seeds must be an integer, got 'ten' (str)")
