@@ -13,8 +13,10 @@
 
 Tasks: ``coverage`` or ``exploration`` (the map is discovered with a range sensor,
 ``sensor_range=22``); ``task`` also picks the shipped model. In exploration the experts are
-omniscient by default (``expert.information=full``, the imitation teacher) or fair
-(``expert.information=known``: only what the team has discovered).
+omniscient by default (``expert.information=full``, the imitation teacher), fair
+(``expert.information=known``: only what the team has discovered), or planning on the floor
+plan (``expert.information=expected``: the true map, the discovered points, and each
+undiscovered waypoint worth the share of points of interest among the discovered ones).
 Policies: ``greedy`` (each robot on its ego-graph), ``greedy_central`` (same actions, from
 ``state()``), ``expert`` (open-loop routing), ``expert_rh`` (receding horizon over ``hops``;
 ``expert.clock=false``: over ``hops`` steps even near the end, blind to the clock),

@@ -13,6 +13,10 @@
     python scripts/train_bc.py init=MODEL.pt steps=0 dagger.rounds=4 dagger.fraction=0.5 \
         dagger.expert_mode=receding dagger.expert_horizon=19 dagger.expert_clock=false \
         ties=true     # learn the expert's set of equally short moves, not its tie-break
+    python scripts/train_bc.py --config configs/bc_exploration.yaml init=MODEL.pt steps=0 \
+        dagger.rounds=5 dagger.fraction=0.5 dagger.expert_mode=receding \
+        dagger.expert_horizon=19 dagger.expert_clock=false \
+        dagger.expert_information=expected   # exploration labels from the floor plan
 
 Re-running with the same ``out`` resumes from ``out/checkpoint.pt`` (with more
 ``dagger.rounds``, a finished run goes on with the next round). Any key of

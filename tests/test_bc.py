@@ -355,6 +355,11 @@ def test_dagger_can_label_with_a_receding_expert_blind_to_the_clock(tmp_path) ->
         ({"expert_mode": "closed"}, "expert_mode"),
         ({"expert_mode": "receding"}, "expert_horizon"),
         ({"expert_clock": False}, "expert_clock=false needs"),
+        ({"expert_information": "partial"}, "expert_information must be"),
+        (
+            {"expert_mode": "gnn", "teacher": ["t.pt"], "expert_information": "known"},
+            "a routing expert only",
+        ),
     ]:
         with pytest.raises(ValueError, match=message):
             DaggerConfig(**bad)

@@ -261,3 +261,40 @@ def test_omniscient_expert_plays_the_same_episode_in_both_tasks() -> None:
     assert np.array_equal(episodes[0].robot_node, episodes[1].robot_node)
     assert np.array_equal(episodes[0].actions, episodes[1].actions)
     assert np.array_equal(episodes[0].interest, episodes[1].interest)
+
+
+def test_expected_expert_values_the_unknown_by_the_share_of_points_seen(u_graph) -> None:  # noqa: ANN001
+    """The "expected" expert plans on the true map: the discovered points are worth one prize,
+    each undiscovered waypoint the share of points of interest among the discovered ones; it
+    heads for the larger unknown, where the omniscient expert heads for the hidden point."""
+    pytest.importorskip("pyvrp")
+    from agents.experts import RoutingExpert, build_problem
+
+    # robot on 2 with a 6 m sensor: knows 1, 2, 3, of which 2 (visited at the start) is a
+    # point: share 1/3; 0 (west) is the one point left
+    env, _ = explore(u_graph, [2], [0, 2], sensor_range=6.0, hops=8, max_steps=6)
+    expert = RoutingExpert(mode="receding", horizon=6, information="expected", max_iterations=50)
+    snapshot = env.snapshot()
+    value = expert.value(snapshot)
+    assert value.tolist() == pytest.approx([1 / 3, 1, 1, 1, 1 / 3, 1 / 3, 1 / 3])
+    problem = build_problem(expert.visible(snapshot), 6, value=value)
+    assert problem.candidates.tolist() == [0, 4, 5, 6]  # 1, 2 and 3 are known and empty
+    assert problem.prizes().tolist() == [3333] * 4
+    # north: 4, 5, 6 (1/3 each) beat west to 0 (1/3) and back to 4 in 6 hops (2/3)
+    assert expert.act_env(env) == {"robot_0": 2}
+    omniscient = RoutingExpert(mode="receding", horizon=6, information="full", max_iterations=50)
+    assert omniscient.act_env(env) == {"robot_0": 3}  # west, to the hidden point
+    assert RoutingExpert(information="full").value(snapshot) is None
+
+
+def test_points_worth_nothing_are_no_candidates(path_graph) -> None:  # noqa: ANN001
+    pytest.importorskip("pyvrp")
+    from agents.experts import build_problem
+
+    env = marl_cover.parallel_env(graph=path_graph, num_robots=1, hops=7, max_steps=8)
+    env.reset(seed=0, options={"robot_nodes": [0], "interest_nodes": [2, 4, 6]})
+    value = np.array([1, 1, 0.5, 1, 0.0, 1, 1, 1])
+    problem = build_problem(env.snapshot(), 7, value=value)
+    assert problem.candidates.tolist() == [2, 6] and problem.prizes().tolist() == [5000, 10000]
+    plain = build_problem(env.snapshot(), 7)
+    assert plain.candidates.tolist() == [2, 4, 6] and plain.prizes().tolist() == [10000] * 3

@@ -10,9 +10,6 @@ import numpy as np
 
 from agents.experts.problem import UNREACHABLE, RoutingProblem
 
-#: Prize of one point of interest in solver units: above any route length, so the solvers
-#: maximise the points first and minimise hops second.
-PRIZE = 10_000
 BACKENDS = ("pyvrp", "ortools")
 
 
@@ -72,8 +69,8 @@ def solve_ortools(
     routing.AddDimensionWithVehicleCapacity(
         transit, 0, [int(b) for b in problem.budget], True, "hops"
     )
-    for k in range(c):
-        routing.AddDisjunction([manager.NodeToIndex(r + k)], PRIZE)
+    for k, prize in enumerate(problem.prizes().tolist()):
+        routing.AddDisjunction([manager.NodeToIndex(r + k)], prize)
     params = pywrapcp.DefaultRoutingSearchParameters()
     params.first_solution_strategy = routing_enums_pb2.FirstSolutionStrategy.PATH_CHEAPEST_ARC
     params.local_search_metaheuristic = (
@@ -130,7 +127,8 @@ def solve_pyvrp(
     np.fill_diagonal(matrix, 0)
     locations = [pyvrp.Location(0.0, 0.0) for _ in range(n)]
     depots = [pyvrp.Depot(i) for i in range(r + 1)]
-    clients = [pyvrp.Client(r + 1 + k, prize=PRIZE, required=False) for k in range(c)]
+    prizes = problem.prizes().tolist()
+    clients = [pyvrp.Client(r + 1 + k, prize=prizes[k], required=False) for k in range(c)]
     vehicles = [
         pyvrp.VehicleType(1, start_depot=i, end_depot=r, max_distance=int(problem.budget[i]))
         for i in range(r)

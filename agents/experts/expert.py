@@ -19,6 +19,11 @@ Information (exploration):
   (:meth:`marl_cover.env.CoverageSnapshot.known`): the known graph, the discovered unvisited
   points of interest, and one prize for each frontier waypoint (a discovered waypoint next to
   undiscovered ones), so that routes also push into the unknown.
+- ``"expected"`` (the floor plan, not the points): plans on the true map, where the discovered
+  unvisited points of interest are worth one prize each and every undiscovered waypoint the
+  share of the discovered waypoints that are points of interest (what it is expected to hold).
+  Its routes lead into the unknown where the map holds many waypoints, not to the points hidden
+  there, so its actions depend on what a robot can see far less than the omniscient expert's.
 
 Fallback (it never crashes an episode): a robot whose route is empty (nothing in reach, an
 empty, failed or infeasible solve) takes the greedy action toward the nearest unvisited point
@@ -46,7 +51,7 @@ from marl_cover.env import CoverageSnapshot
 from marl_cover.graph import SpatialGraph
 
 MODES = ("open_loop", "receding")
-INFORMATION = ("full", "known")
+INFORMATION = ("full", "known", "expected")
 
 
 def step_toward(graph: SpatialGraph, robot_node: np.ndarray, goals: np.ndarray) -> np.ndarray:
@@ -173,7 +178,7 @@ class RoutingExpert:
         ``"failed_solve"``).
         """
         horizon = self.horizon if self.mode == "receding" else None
-        problem = build_problem(snapshot, horizon, self.clock)
+        problem = build_problem(snapshot, horizon, self.clock, self.value(snapshot))
         initial = self._warm_start(problem)
         start = time.perf_counter()
         try:
@@ -258,13 +263,28 @@ class RoutingExpert:
         return actions
 
     def visible(self, snapshot: CoverageSnapshot) -> CoverageSnapshot:
-        """The snapshot the expert plans on: unchanged (``"full"``), or the known graph with the
-        discovered points of interest and the frontier as prizes (``"known"``)."""
+        """The snapshot the expert plans on: unchanged (``"full"``), the known graph with the
+        discovered points of interest and the frontier as prizes (``"known"``), or the true
+        graph with the discovered points of interest and the undiscovered waypoints as prizes
+        (``"expected"``; their worth: :meth:`value`)."""
         if self.information == "full":
             return snapshot
+        if self.information == "expected":
+            expected = (snapshot.interest & snapshot.discovered) | ~snapshot.discovered
+            return replace(snapshot, interest=expected)
         frontier = snapshot.frontier
         known = snapshot.known()
         return replace(known, interest=known.interest | frontier)
+
+    def value(self, snapshot: CoverageSnapshot) -> np.ndarray | None:
+        """``(N,)`` worth of each waypoint's prize (``"expected"``: 1 where discovered, else
+        the share of the discovered waypoints that are points of interest); ``None``: 1 each."""
+        if self.information != "expected":
+            return None
+        share = np.count_nonzero(snapshot.interest & snapshot.discovered) / max(
+            np.count_nonzero(snapshot.discovered), 1
+        )
+        return np.where(snapshot.discovered, 1.0, share)
 
     def act_env(self, env: Any) -> dict[str, int]:
         """Actions keyed by agent name, from ``env.snapshot()``."""

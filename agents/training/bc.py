@@ -90,6 +90,11 @@ class DaggerConfig:
         expert_clock: ``False``: the receding expert plans over ``expert_horizon`` steps even
             near the end of the episode, so its labels depend only on what the (clock-blind)
             network sees.
+        expert_information: What the routing expert plans on in exploration
+            (:class:`~agents.experts.RoutingExpert`'s ``information``): ``"full"`` (the true
+            map and every point, the paper's teacher), ``"known"`` or ``"expected"`` (the true
+            map, the discovered points, and each undiscovered waypoint worth the share of
+            points of interest among the discovered ones).
         env: Overrides of the BC ``env`` for the roll-outs (e.g. ``{"map": "paper_full",
             "num_robots": 10, "max_steps": 131}``: states of a larger map and team than the
             dataset's). With any, the DAgger states are collated apart from the dataset's
@@ -112,6 +117,7 @@ class DaggerConfig:
     expert_mode: str = "open_loop"
     expert_horizon: int | None = None
     expert_clock: bool = True
+    expert_information: str = "full"
     env: dict[str, Any] = field(default_factory=dict)
     reuse: list[str] = field(default_factory=list)
     teacher: list[str] = field(default_factory=list)
@@ -132,6 +138,13 @@ class DaggerConfig:
             raise ValueError("dagger.expert_mode=receding needs dagger.expert_horizon >= 1")
         if not self.expert_clock and self.expert_mode != "receding":
             raise ValueError("dagger.expert_clock=false needs dagger.expert_mode=receding")
+        if self.expert_information not in ("full", "known", "expected"):
+            raise ValueError(
+                "dagger.expert_information must be 'full', 'known' or 'expected', "
+                f"got {self.expert_information!r}"
+            )
+        if self.expert_information != "full" and self.expert_mode == "gnn":
+            raise ValueError("dagger.expert_information applies to a routing expert only")
         if self.env and self.fraction is None:
             raise ValueError("dagger.env needs dagger.fraction (the share of its states)")
 
@@ -375,6 +388,7 @@ def _routing_expert(dagger: DaggerConfig, seed: int) -> Any:
         mode=dagger.expert_mode,
         horizon=dagger.expert_horizon,
         clock=dagger.expert_clock,
+        information=dagger.expert_information,
         max_iterations=dagger.iterations,
         seed=seed,
     )
