@@ -7,12 +7,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import random_grid_graph
 from pettingzoo.test import parallel_api_test, parallel_seed_test
 
 import marl_cover
 from marl_cover.continuous import DynamicsConfig, QuadrotorCoverageEnv, WaypointLocator
 from marl_cover.dynamics import QuadrotorParams, QuadrotorTeam
-from tests.helpers import random_grid_graph
 
 
 def fly(params: QuadrotorParams, target: np.ndarray, seconds: float, **team_kwargs) -> dict:

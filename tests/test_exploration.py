@@ -6,6 +6,7 @@ import functools
 
 import numpy as np
 import pytest
+from helpers import random_grid_graph
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from pettingzoo.test import parallel_api_test, parallel_seed_test
@@ -14,7 +15,6 @@ import marl_cover
 from marl_cover.discovery import Discovery, frontier_of, known_neighbors, sensor_footprints
 from marl_cover.ego import build_ego_graphs
 from marl_cover.graph import SpatialGraph
-from tests.helpers import random_grid_graph
 
 SMALL = {"task": "exploration", "city_size": 120, "hops": 4}
 
