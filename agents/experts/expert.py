@@ -28,9 +28,10 @@ Information (exploration):
 Fallback (it never crashes an episode): a robot whose route is empty (nothing in reach, an
 empty, failed or infeasible solve) takes the greedy action toward the nearest unvisited point
 of interest within ``fallback_reach`` hops (default: anywhere; the expert knows the whole map,
-and the horizon bounds only its plans), staying if there is none. Each
-step's fallbacks and re-plans are in :attr:`RoutingExpert.info`; totals in
-:attr:`RoutingExpert.counts`.
+and the horizon bounds only its plans), staying if there is none; the points are those of
+the snapshot it plans on (:meth:`RoutingExpert.visible`: with ``"known"`` the frontier counts,
+with ``"expected"`` every undiscovered waypoint). Each step's fallbacks and re-plans are in
+:attr:`RoutingExpert.info`; totals in :attr:`RoutingExpert.counts`.
 
 The expert reads only :meth:`marl_cover.env.CoverageEnv.snapshot`, never the env's private
 state.
