@@ -55,6 +55,7 @@ from agents.datasets import (
     write_shard,
 )
 from agents.evaluation import evaluate
+from agents.experts.expert import INFORMATION
 from agents.models.gnn import AggregationGNN, GNNConfig, action_logits
 from agents.models.policy import EnsemblePolicy, GNNPolicy, load_model, save_model
 from agents.training.data import GraphTable, collate_states, episode_transitions
@@ -138,9 +139,9 @@ class DaggerConfig:
             raise ValueError("dagger.expert_mode=receding needs dagger.expert_horizon >= 1")
         if not self.expert_clock and self.expert_mode != "receding":
             raise ValueError("dagger.expert_clock=false needs dagger.expert_mode=receding")
-        if self.expert_information not in ("full", "known", "expected"):
+        if self.expert_information not in INFORMATION:
             raise ValueError(
-                "dagger.expert_information must be 'full', 'known' or 'expected', "
+                f"dagger.expert_information must be one of {INFORMATION}, "
                 f"got {self.expert_information!r}"
             )
         if self.expert_information != "full" and self.expert_mode == "gnn":
