@@ -201,7 +201,8 @@ class MissionConfig:
         map: Map preset or grid file (the paper's 1266-waypoint graph).
         num_robots: Team size.
         interest_fraction: Fraction of the waypoints that are points of interest.
-        hops: Receptive field of greedy (the GNN uses its own).
+        hops: Receptive field of greedy (the GNN uses its own: the ego-graphs span the larger
+            of the two).
         methods: Any of ``"greedy"`` (the paper's: a random move when nothing is within
             ``hops``), ``"greedy_stay"`` (stays instead), ``"gnn"``, ``"expert"``.
         seeds: Missions per method (seeds ``seed .. seed + seeds - 1``, paired).
@@ -250,14 +251,25 @@ class MissionConfig:
             self.dynamics = DynamicsConfig.from_dict(self.dynamics)
 
     def make_env(self) -> QuadrotorCoverageEnv:
-        """The mission's environment."""
+        """The mission's environment; its ego-graphs span :meth:`observation_hops`."""
         return QuadrotorCoverageEnv(
             map=self.map,
             num_robots=self.num_robots,
             interest_fraction=self.interest_fraction,
-            hops=self.hops,
+            hops=self.observation_hops(),
             dynamics=self.dynamics,
         )
+
+    def observation_hops(self) -> int:
+        """Radius of the ego-graphs: ``hops``, or the GNN's receptive field where it flies on
+        ego-graphs and sees farther (a larger ego-graph changes nothing for greedy, which
+        counts only the points within its ``hops``)."""
+        if "gnn" not in self.methods or self.gnn_centralized:
+            return self.hops
+        from agents.models.policy import load_model
+
+        model, _ = load_model(self.gnn_model_path())
+        return max(self.hops, model.config.hops)
 
     def gnn_model_path(self) -> Path:
         """The GNN model file flown: ``checkpoint``, or :func:`mission_model_path`."""

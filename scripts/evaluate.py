@@ -6,6 +6,7 @@
     python scripts/evaluate.py policy=expert_rh hops=19 expert.time_limit=0.15
     python scripts/evaluate.py policy=expert_rh hops=19 expert.clock=false expert.iterations=200
     python scripts/evaluate.py task=exploration policy=expert_rh expert.information=known map=paper
+    python scripts/evaluate.py policy=expert_local hops=19 expert.clock=false expert.iterations=200
     python scripts/evaluate.py policy=gnn map=paper                 # the shipped model
     python scripts/evaluate.py policy=gnn checkpoint=outputs/bc/nonlinear_k19/best.pt \
         map=paper_large num_robots=100 gnn.centralized=true
@@ -20,6 +21,8 @@ undiscovered waypoint worth the share of points of interest among the discovered
 Policies: ``greedy`` (each robot on its ego-graph), ``greedy_central`` (same actions, from
 ``state()``), ``expert`` (open-loop routing), ``expert_rh`` (receding horizon over ``hops``;
 ``expert.clock=false``: over ``hops`` steps even near the end, blind to the clock),
+``expert_local`` (each robot plans alone over what its ``hops``-hop ego-graph holds,
+``agents.experts.LocalRoutingExpert``; ``fallback`` with nothing in view),
 ``gnn`` (the shipped model of the task, or ``checkpoint=PATH``; each robot on its own ego-graph,
 or ``gnn.centralized=true`` for one pass over ``state()``; argmax actions unless
 ``gnn.deterministic=false``; comma-separated files play as one ensemble,
@@ -47,7 +50,7 @@ from agents.evaluation import evaluate  # noqa: E402
 from marl_cover import CoverageConfig, parallel_env  # noqa: E402
 from marl_cover.config import TASKS, check_field_types  # noqa: E402
 
-POLICIES = ("greedy", "greedy_central", "expert", "expert_rh", "gnn")
+POLICIES = ("greedy", "greedy_central", "expert", "expert_rh", "expert_local", "gnn")
 
 
 @dataclass
@@ -74,7 +77,7 @@ class EvaluateOptions:
     episodes: int = 100
     seed: int = 0
     out: str = "outputs/evaluate.json"
-    fallback: str = "random"  # greedy's choice when nothing is in reach
+    fallback: str = "random"  # greedy's (and expert_local's) choice when nothing is in reach
     checkpoint: str | None = None  # policy=gnn: a model file (default: the shipped model)
     # or comma-separated model files: an ensemble
 
@@ -129,8 +132,13 @@ def parse_overrides(
         raise SystemExit(str(error)) from error
     if options.policy not in POLICIES:
         raise SystemExit(f"unknown policy {options.policy!r}; policies: {list(POLICIES)}")
-    if not expert.clock and options.policy != "expert_rh":
-        raise SystemExit("expert.clock=false applies to policy=expert_rh only")
+    if not expert.clock and options.policy not in ("expert_rh", "expert_local"):
+        raise SystemExit("expert.clock=false applies to policy=expert_rh and expert_local only")
+    if expert.information != "full" and options.policy == "expert_local":
+        raise SystemExit(
+            "expert.information does not apply to policy=expert_local (it plans on what each "
+            "robot's ego-graph holds)"
+        )
     return options, expert, gnn, env
 
 
@@ -175,8 +183,18 @@ def make_policy(
 
         cls = GreedyPolicy if options.policy == "greedy" else CentralizedGreedyPolicy
         return cls(hops, fallback=options.fallback)
-    from agents.experts import RoutingExpert
+    from agents.experts import LocalRoutingExpert, RoutingExpert
 
+    if options.policy == "expert_local":
+        return LocalRoutingExpert(
+            hops,
+            backend=expert.backend,
+            time_limit=expert.time_limit,
+            seed=expert.seed,
+            max_iterations=expert.iterations,
+            clock=expert.clock,
+            fallback=options.fallback,
+        )
     receding = options.policy == "expert_rh"
     return RoutingExpert(
         backend=expert.backend,

@@ -63,7 +63,25 @@ def test_cli_evaluates_a_receding_expert_blind_to_the_clock(tmp_path) -> None:
     expert = RoutingExpert(mode="receding", horizon=4, clock=False, max_iterations=20)
     assert rewards == [r.reward for r in evaluate(env, expert, [3, 4]).results]
     result = run_cli("policy=expert", "expert.clock=false")
-    assert result.returncode != 0 and "policy=expert_rh only" in result.stderr
+    assert result.returncode != 0 and "policy=expert_rh and expert_local only" in result.stderr
+
+
+def test_cli_evaluates_the_local_expert(tmp_path) -> None:
+    pytest.importorskip("pyvrp")
+    from agents.experts import LocalRoutingExpert
+
+    out = tmp_path / "local.json"
+    args = ("policy=expert_local", "hops=3", "episodes=2", "seed=3", "max_steps=8", "num_robots=3")
+    result = run_cli(*args, "expert.clock=false", "expert.iterations=20", f"out={out}")
+    assert result.returncode == 0, result.stderr
+    record = json.loads(out.read_text())
+    rewards = [r["reward"] for r in record["summary"]["results"]]
+    env = marl_cover.parallel_env(max_steps=8, num_robots=3, hops=3)
+    expert = LocalRoutingExpert(3, clock=False, max_iterations=20, fallback="random")
+    assert rewards == [r.reward for r in evaluate(env, expert, [3, 4]).results]
+    assert record["summary"]["policy_counts"]["solves"] == 2 * 8 * 3  # a solve per robot-step
+    result = run_cli("policy=expert_local", "expert.information=known")
+    assert result.returncode != 0 and "does not apply to policy=expert_local" in result.stderr
 
 
 def test_cli_rejects_unknown_keys() -> None:

@@ -6,7 +6,7 @@ import pytest
 
 import marl_cover
 from agents.evaluation import evaluate
-from agents.experts import RoutingExpert, build_problem, solve
+from agents.experts import LocalRoutingExpert, RoutingExpert, build_problem, solve
 
 pytest.importorskip("pyvrp")
 pytest.importorskip("ortools")
@@ -116,3 +116,45 @@ def test_receding_horizon_reaches_the_optimum(path_graph, backend, warm_start) -
     )
     assert play(env, expert) == 4
     assert expert.counts["solves"] == 10 and expert.counts["failed_solve"] == 0
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_local_expert_plans_on_what_each_robot_sees(path_graph, backend) -> None:
+    """Robots on 3 and 7, points on 0, 5 and 6, horizon 3. The team expert sends robot_0 west
+    to 0 and leaves 5 and 6 to robot_1; robot_0 alone does not see robot_1 (four hops away)
+    and heads east for the two points it sees, while robot_1 sees only 5 and 6 as well."""
+    env = path_env(path_graph, [3, 7], [0, 5, 6], 10)
+    team = RoutingExpert(backend=backend, mode="receding", horizon=3, time_limit=0.1)
+    assert team.act_env(env) == {"robot_0": 3, "robot_1": 3}  # west, west
+    local = LocalRoutingExpert(3, backend=backend, time_limit=0.1)
+    view = local.view(env.snapshot(), 0)
+    assert view.robot_node.tolist() == [3] and view.discovered.nonzero()[0].tolist() == [
+        0,
+        1,
+        2,
+        3,
+        4,
+        5,
+        6,
+    ]
+    assert local.view(env.snapshot(), 1).robot_node.tolist() == [7]
+    assert local.act_env(env) == {"robot_0": 1, "robot_1": 3}  # east, west
+    assert local.counts["solves"] == 2 and local.counts["fallback_steps"] == 0
+
+
+def test_local_expert_falls_back_when_nothing_is_in_view(path_graph) -> None:
+    env = path_env(path_graph, [3], [7], 10)  # four hops away, beyond a horizon of 3
+    stay = LocalRoutingExpert(3, max_iterations=10)
+    assert stay.act_env(env) == {"robot_0": 0} and stay.counts["fallback_steps"] == 1
+    moves = set()
+    for seed in range(8):
+        wander = LocalRoutingExpert(3, max_iterations=10, fallback="random")
+        wander.reset(seed)
+        first = wander.act_env(env)["robot_0"]
+        wander.reset(seed)
+        assert wander.act_env(env)["robot_0"] == first  # the seed decides
+        moves.add(first)
+    assert moves == {1, 3}  # east or west, never stay
+    assert LocalRoutingExpert(4, max_iterations=10).act_env(env) == {"robot_0": 1}
+    with pytest.raises(ValueError, match="fallback must be one of"):
+        LocalRoutingExpert(3, fallback="spin")

@@ -287,6 +287,19 @@ def test_expected_expert_values_the_unknown_by_the_share_of_points_seen(u_graph)
     assert RoutingExpert(information="full").value(snapshot) is None
 
 
+def test_local_expert_sees_the_known_ball_and_the_frontier(u_graph) -> None:  # noqa: ANN001
+    pytest.importorskip("pyvrp")
+    from agents.experts import LocalRoutingExpert
+
+    # robot on 2 with a 6 m sensor knows 1, 2, 3; the hidden point 0 is no prize, the
+    # frontier 1 and 3 (next to 0 and 4) are
+    env, _ = explore(u_graph, [2], [0, 2], sensor_range=6.0, hops=8, max_steps=6)
+    view = LocalRoutingExpert(6).view(env.snapshot(), 0)
+    assert np.flatnonzero(view.discovered).tolist() == [1, 2, 3]
+    assert np.flatnonzero(view.unvisited_interest).tolist() == [1, 3]
+    assert view.graph.neighbors[[1, 3]].max(axis=1).tolist() == [2, 2]  # no edge to 0 or 4
+
+
 def test_points_worth_nothing_are_no_candidates(path_graph) -> None:  # noqa: ANN001
     pytest.importorskip("pyvrp")
     from agents.experts import build_problem

@@ -229,6 +229,43 @@ def test_wider_copy_keeps_the_logits_and_trains_the_new_units(config) -> None:
         narrow.wider_copy(8)
 
 
+@pytest.mark.parametrize(
+    "config",
+    [
+        GNNConfig(kind="linear", hops=3, hidden=8),
+        GNNConfig(kind="nonlinear", hops=3, hidden=8),
+        GNNConfig(kind="nonlinear", hops=3, hidden=8, per_hop=True, norm=True),
+    ],
+    ids=str,
+)
+def test_deeper_copy_keeps_the_logits_and_trains_the_far_hops(config) -> None:
+    torch.manual_seed(6)
+    near = AggregationGNN(config).double()
+    if config.per_hop:  # distinct blocks, so that a copy from the wrong hop would show
+        with torch.no_grad():
+            for p in near.parameters():
+                p.add_(0.1 * torch.randn_like(p))
+    deep = near.deeper_copy(6)
+    assert deep.config == replace(config, hops=6)
+    graph = state_graph(num_robots=3, hops=6, city_size=90, seed=5)
+    torch.testing.assert_close(deep(*graph), near(*graph), atol=1e-12, rtol=0)
+    torch.testing.assert_close(deep.reference_forward(*graph), near(*graph), atol=1e-12, rtol=0)
+    # the new stages read nothing yet, but their readout weights get gradients
+    assert torch.all(deep.readout.weight[0, 4 * 8 :] == 0)
+    deep(*graph).square().sum().backward()
+    assert deep.readout.weight.grad[0, 4 * 8 :].abs().sum() > 0
+    if config.per_hop:  # hops 0..2 keep their blocks; the new ones copy the last
+        for hop in range(3):
+            assert torch.equal(deep.edge_blocks[hop][0].weight, near.edge_blocks[hop][0].weight)
+        for hop in range(3, 6):
+            assert torch.equal(deep.edge_blocks[hop][0].weight, near.edge_blocks[2][0].weight)
+        for hop in range(2, 5):
+            assert torch.equal(deep.node_blocks[hop][0].weight, near.node_blocks[1][0].weight)
+            assert torch.equal(deep.node_norms[hop].weight, near.node_norms[1].weight)
+    with pytest.raises(ValueError, match="hops > 3"):
+        near.deeper_copy(3)
+
+
 def test_grown_to_widens_and_splits_the_hops_or_says_why_not() -> None:
     torch.manual_seed(5)
     shared = AggregationGNN(GNNConfig(hops=3, hidden=8)).double()
@@ -238,8 +275,11 @@ def test_grown_to_widens_and_splits_the_hops_or_says_why_not() -> None:
     graph = state_graph(num_robots=2, hops=3, city_size=90, seed=6)
     torch.testing.assert_close(grown(*graph), shared(*graph), atol=1e-12, rtol=0)
     assert shared.grown_to(shared.config) is shared
+    deeper = shared.grown_to(GNNConfig(hops=5, hidden=8, per_hop=True))
+    assert len(deeper.edge_blocks) == 5 and len(deeper.node_blocks) == 4
+    torch.testing.assert_close(deeper(*graph), shared(*graph), atol=1e-12, rtol=0)
     for other in (
-        GNNConfig(hops=4, hidden=8),
+        GNNConfig(hops=2, hidden=8),
         GNNConfig(hops=3, hidden=4),
         GNNConfig(kind="linear", hops=3, hidden=8),
     ):

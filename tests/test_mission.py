@@ -103,6 +103,28 @@ def test_mission_config_rejects_unknown_methods_and_keys() -> None:
         MissionConfig(frame_every=0.0)
 
 
+def test_ego_graphs_span_the_gnn_receptive_field(tmp_path: Path) -> None:
+    """A GNN that sees farther than greedy's ``hops`` gets ego-graphs of its own radius, and
+    greedy flies the same mission on them (it counts only the points within its ``hops``)."""
+    import torch
+
+    from agents.models.gnn import AggregationGNN, GNNConfig
+    from agents.models.policy import save_model
+
+    torch.manual_seed(0)
+    path = tmp_path / "far.pt"
+    save_model(path, AggregationGNN(GNNConfig(hops=9, hidden=4)), {})
+    config = MissionConfig(hops=6, checkpoint=str(path), methods=["greedy", "gnn"])
+    assert config.observation_hops() == 9
+    assert MissionConfig(hops=6, checkpoint=str(path), methods=["greedy"]).observation_hops() == 6
+    assert MissionConfig(hops=6, checkpoint=str(path), gnn_centralized=True).observation_hops() == 6
+    assert MissionConfig(hops=12, checkpoint=str(path)).observation_hops() == 12
+    near = run_mission(small_env(), GreedyPolicy(6, fallback="stay"), seed=2)
+    wide = QuadrotorCoverageEnv(dynamics={"max_time": 60.0}, **{**SMALL, "hops": 9})
+    far = run_mission(wide, GreedyPolicy(6, fallback="stay"), seed=2)
+    assert far.visited == near.visited and far.total > 0
+
+
 def test_run_mission_script(tmp_path: Path) -> None:
     out = tmp_path / "mission"
     args = [

@@ -2,6 +2,15 @@
 
 from agents.experts.backends import BACKENDS, solve
 from agents.experts.expert import MODES, RoutingExpert
+from agents.experts.local import LocalRoutingExpert
 from agents.experts.problem import RoutingProblem, build_problem
 
-__all__ = ["BACKENDS", "MODES", "RoutingExpert", "RoutingProblem", "build_problem", "solve"]
+__all__ = [
+    "BACKENDS",
+    "MODES",
+    "LocalRoutingExpert",
+    "RoutingExpert",
+    "RoutingProblem",
+    "build_problem",
+    "solve",
+]

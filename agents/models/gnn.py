@@ -316,6 +316,46 @@ class AggregationGNN(nn.Module):
                 norm.load_state_dict(self.node_norms[0].state_dict())
         return copy.train(self.training)
 
+    def deeper_copy(self, hops: int) -> AggregationGNN:
+        """The same function as a model with a larger receptive field, ``hops`` blocks.
+
+        The readout's weights of the new stages (after blocks ``K + 1 .. hops``) are zero, so
+        the logits are unchanged; they get gradients, so training can put the far hops to use.
+        A per-hop model's new blocks start as copies of its last ones (the last edge block, and
+        the last node block for the node updates that now reach an output). A way to widen a
+        trained model's view (its ego-graphs must then be ``hops`` hops too) without starting
+        over.
+
+        Raises:
+            ValueError: ``hops`` is not larger than this model's.
+        """
+        old_hops, hidden = self.config.hops, self.config.hidden
+        if hops <= old_hops:
+            raise ValueError(f"deeper_copy needs hops > {old_hops}, got {hops}")
+        parameter = self.readout.weight
+        copy = AggregationGNN(replace(self.config, hops=hops))
+        copy = copy.to(device=parameter.device, dtype=parameter.dtype)
+        state = {k: v for k, v in self.state_dict().items() if not k.startswith("readout.")}
+        copy.load_state_dict(state, strict=False)
+        with torch.no_grad():
+            copy.readout.weight.zero_()
+            copy.readout.weight[:, : (old_hops + 1) * hidden] = self.readout.weight
+            copy.readout.bias.copy_(self.readout.bias)
+        if self.config.kind == "nonlinear" and self.config.per_hop:
+            last_node = self.node_blocks[-1] if old_hops > 1 else None
+            for hop in range(old_hops, hops):
+                copy.edge_blocks[hop].load_state_dict(self.edge_blocks[-1].state_dict())
+            for hop in range(old_hops - 1, hops - 1):
+                if last_node is not None:
+                    copy.node_blocks[hop].load_state_dict(last_node.state_dict())
+            if self.config.norm:
+                for hop in range(old_hops, hops):
+                    copy.edge_norms[hop].load_state_dict(self.edge_norms[-1].state_dict())
+                for hop in range(old_hops - 1, hops - 1):
+                    if old_hops > 1:
+                        copy.node_norms[hop].load_state_dict(self.node_norms[-1].state_dict())
+        return copy.train(self.training)
+
     def wider_copy(self, hidden: int, seed: int = 0) -> AggregationGNN:
         """The same function as a model with ``hidden`` units in every MLP and latent.
 
@@ -353,7 +393,8 @@ class AggregationGNN(nn.Module):
 
     def grown_to(self, config: GNNConfig, seed: int = 0) -> AggregationGNN:
         """This model grown to ``config`` with the same logits: a block per hop
-        (:meth:`per_hop_copy`) and more width (:meth:`wider_copy`) as ``config`` asks; itself
+        (:meth:`per_hop_copy`), more hops (:meth:`deeper_copy`) and more width
+        (:meth:`wider_copy`) as ``config`` asks; itself
         when ``config`` is its own.
 
         Raises:
@@ -362,6 +403,8 @@ class AggregationGNN(nn.Module):
         grown = self
         if config.per_hop and not self.config.per_hop and self.config.kind == "nonlinear":
             grown = grown.per_hop_copy()
+        if config.hops > self.config.hops:
+            grown = grown.deeper_copy(config.hops)
         if config.hidden > self.config.hidden:
             grown = grown.wider_copy(config.hidden, seed=seed)
         if grown.config != config:

@@ -158,8 +158,8 @@ class BCConfig:
     out: str = "outputs/bc/run"
     model: GNNConfig = field(default_factory=GNNConfig)
     # start from this model file: its config must equal ``model``, or be ``model`` with one
-    # shared block where ``model.per_hop`` is set and/or a smaller ``hidden`` (the model then
-    # grows from it with the same logits: AggregationGNN.grown_to)
+    # shared block where ``model.per_hop`` is set, fewer ``hops`` and/or a smaller ``hidden``
+    # (the model then grows from it with the same logits: AggregationGNN.grown_to)
     init: str | None = None
     env: dict[str, Any] = field(default_factory=lambda: {"map": "paper"})
     batch_size: int = 32
