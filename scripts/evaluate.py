@@ -6,6 +6,7 @@
     python scripts/evaluate.py policy=expert_rh hops=19 expert.time_limit=0.15
     python scripts/evaluate.py policy=expert_rh hops=19 expert.clock=false expert.iterations=200
     python scripts/evaluate.py task=exploration policy=expert_rh expert.information=known map=paper
+    python scripts/evaluate.py policy=expert_rh hops=19 expert.fallback_reach=19  # stays beyond
     python scripts/evaluate.py policy=expert_local hops=19 expert.clock=false expert.iterations=200
     python scripts/evaluate.py policy=gnn map=paper                 # the shipped model
     python scripts/evaluate.py policy=gnn checkpoint=outputs/bc/nonlinear_k19/best.pt \
@@ -62,6 +63,7 @@ class ExpertOptions:
     information: str = "full"
     clock: bool = True  # expert_rh: false plans over `hops` steps even when fewer are left
     iterations: int | None = None  # PyVRP iterations per solve instead of time_limit
+    fallback_reach: int | None = None  # expert, expert_rh: the fallback's reach (None: anywhere)
 
 
 @dataclass
@@ -134,6 +136,8 @@ def parse_overrides(
         raise SystemExit(f"unknown policy {options.policy!r}; policies: {list(POLICIES)}")
     if not expert.clock and options.policy not in ("expert_rh", "expert_local"):
         raise SystemExit("expert.clock=false applies to policy=expert_rh and expert_local only")
+    if expert.fallback_reach is not None and options.policy not in ("expert", "expert_rh"):
+        raise SystemExit("expert.fallback_reach applies to policy=expert and expert_rh only")
     if expert.information != "full" and options.policy == "expert_local":
         raise SystemExit(
             "expert.information does not apply to policy=expert_local (it plans on what each "
@@ -206,6 +210,7 @@ def make_policy(
         information=expert.information,
         clock=expert.clock,
         max_iterations=expert.iterations,
+        fallback_reach=expert.fallback_reach,
     )
 
 

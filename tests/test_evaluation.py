@@ -64,6 +64,14 @@ def test_cli_evaluates_a_receding_expert_blind_to_the_clock(tmp_path) -> None:
     assert rewards == [r.reward for r in evaluate(env, expert, [3, 4]).results]
     result = run_cli("policy=expert", "expert.clock=false")
     assert result.returncode != 0 and "policy=expert_rh and expert_local only" in result.stderr
+    near = tmp_path / "near.json"
+    result = run_cli(*args, "expert.iterations=20", "expert.fallback_reach=2", f"out={near}")
+    assert result.returncode == 0, result.stderr
+    rewards = [r["reward"] for r in json.loads(near.read_text())["summary"]["results"]]
+    expert = RoutingExpert(mode="receding", horizon=4, max_iterations=20, fallback_reach=2)
+    assert rewards == [r.reward for r in evaluate(env, expert, [3, 4]).results]
+    result = run_cli("policy=gnn", "expert.fallback_reach=3")
+    assert result.returncode != 0 and "policy=expert and expert_rh only" in result.stderr
 
 
 def test_cli_evaluates_the_local_expert(tmp_path) -> None:
