@@ -189,28 +189,23 @@ def make_policy(
         return cls(hops, fallback=options.fallback)
     from agents.experts import LocalRoutingExpert, RoutingExpert
 
+    common = {
+        "backend": expert.backend,
+        "time_limit": expert.time_limit,
+        "seed": expert.seed,
+        "max_iterations": expert.iterations,
+        "clock": expert.clock,
+    }
     if options.policy == "expert_local":
-        return LocalRoutingExpert(
-            hops,
-            backend=expert.backend,
-            time_limit=expert.time_limit,
-            seed=expert.seed,
-            max_iterations=expert.iterations,
-            clock=expert.clock,
-            fallback=options.fallback,
-        )
+        return LocalRoutingExpert(hops, fallback=options.fallback, **common)
     receding = options.policy == "expert_rh"
     return RoutingExpert(
-        backend=expert.backend,
         mode="receding" if receding else "open_loop",
         horizon=hops if receding else None,
-        time_limit=expert.time_limit,
-        seed=expert.seed,
         warm_start=expert.warm_start,
         information=expert.information,
-        clock=expert.clock,
-        max_iterations=expert.iterations,
         fallback_reach=expert.fallback_reach,
+        **common,
     )
 
 

@@ -24,9 +24,8 @@ from typing import Any
 import numpy as np
 
 from agents.experts.expert import RoutingExpert, greedy_goals, lowest_action, shortest_moves
+from agents.greedy import FALLBACKS
 from marl_cover.env import CoverageSnapshot
-
-FALLBACKS = ("stay", "random")
 
 
 class LocalRoutingExpert:
@@ -67,7 +66,7 @@ class LocalRoutingExpert:
             warm_start=False,
             clock=clock,
         )
-        self.counts: Counter[str] = Counter()
+        self.counts: Counter[str] = Counter()  # the planner's solve counters and the fallbacks
         self.reset()
 
     def reset(self, seed: int | None = None) -> None:
@@ -77,7 +76,7 @@ class LocalRoutingExpert:
             self.seed = seed
         self._rng = np.random.default_rng(self.seed)
         self._planner.reset(self.seed)
-        self.counts = Counter()
+        self.counts = self._planner.counts
 
     def view(self, snapshot: CoverageSnapshot, robot: int) -> CoverageSnapshot:
         """What ``robot`` plans on: its ball of ``horizon`` hops on the known graph, the prizes
@@ -98,7 +97,6 @@ class LocalRoutingExpert:
     def act_snapshot(self, snapshot: CoverageSnapshot) -> np.ndarray:
         """Actions ``(R,)``: each robot's first hop of the plan over its own view."""
         actions = np.zeros(len(snapshot.robot_node), dtype=np.int64)
-        before = Counter(self._planner.counts)
         known, frontier = snapshot.known(), snapshot.frontier
         for robot in range(len(snapshot.robot_node)):
             view = self._view(known, frontier, robot)
@@ -113,7 +111,6 @@ class LocalRoutingExpert:
                 available = np.flatnonzero(known.graph.neighbors[known.robot_node[robot]] >= 0)
                 if len(available):
                     actions[robot] = int(self._rng.choice(available)) + 1
-        self.counts.update(Counter(self._planner.counts) - before)
         return actions
 
     def act_env(self, env: Any) -> dict[str, int]:

@@ -342,18 +342,15 @@ class AggregationGNN(nn.Module):
             copy.readout.weight[:, : (old_hops + 1) * hidden] = self.readout.weight
             copy.readout.bias.copy_(self.readout.bias)
         if self.config.kind == "nonlinear" and self.config.per_hop:
-            last_node = self.node_blocks[-1] if old_hops > 1 else None
-            for hop in range(old_hops, hops):
-                copy.edge_blocks[hop].load_state_dict(self.edge_blocks[-1].state_dict())
-            for hop in range(old_hops - 1, hops - 1):
-                if last_node is not None:
-                    copy.node_blocks[hop].load_state_dict(last_node.state_dict())
+            # (new modules, old modules, first new hop): the new hops copy the last old one
+            grown = [(copy.edge_blocks, self.edge_blocks, old_hops)]
+            grown.append((copy.node_blocks, self.node_blocks, old_hops - 1))
             if self.config.norm:
-                for hop in range(old_hops, hops):
-                    copy.edge_norms[hop].load_state_dict(self.edge_norms[-1].state_dict())
-                for hop in range(old_hops - 1, hops - 1):
-                    if old_hops > 1:
-                        copy.node_norms[hop].load_state_dict(self.node_norms[-1].state_dict())
+                grown.append((copy.edge_norms, self.edge_norms, old_hops))
+                grown.append((copy.node_norms, self.node_norms, old_hops - 1))
+            for new, old, first in grown:
+                for module in list(new)[first:] if len(old) else []:  # a 1-hop model: no node
+                    module.load_state_dict(old[-1].state_dict())
         return copy.train(self.training)
 
     def wider_copy(self, hidden: int, seed: int = 0) -> AggregationGNN:
