@@ -49,7 +49,7 @@ from scipy.spatial import cKDTree
 
 from marl_cover.collisions import resolve_collisions
 from marl_cover.config import CoverageConfig, check_field_types, config_from_dict
-from marl_cover.dynamics import QuadrotorParams, QuadrotorTeam
+from marl_cover.dynamics import DYNAMICS_BACKENDS, QuadrotorParams, QuadrotorTeam
 from marl_cover.ego import action_targets
 from marl_cover.env import CoverageEnv, StepResult, _config_kwargs
 
@@ -118,6 +118,9 @@ class DynamicsConfig:
         same_altitude: Two robots within this height difference share an altitude, metres.
         noise_std: Standard deviation of the position measurement noise, metres.
         delay: Actuation delay in seconds.
+        backend: How the bodies are integrated: ``"numpy"`` (the reference), ``"numba"`` (a
+            compiled kernel, the same bits, ~20x faster) or ``"auto"`` (``"numba"`` when
+            installed).
     """
 
     quadrotor: QuadrotorParams = field(default_factory=QuadrotorParams)
@@ -131,6 +134,7 @@ class DynamicsConfig:
     same_altitude: float = 0.5
     noise_std: float = 0.0
     delay: float = 0.0
+    backend: str = "auto"
 
     def __post_init__(self) -> None:
         if isinstance(self.quadrotor, dict):
@@ -156,6 +160,7 @@ class DynamicsConfig:
             (self.same_altitude >= 0, "same_altitude must be >= 0"),
             (self.noise_std >= 0, f"noise_std must be >= 0, got {self.noise_std}"),
             (self.delay >= 0, f"delay must be >= 0, got {self.delay}"),
+            (self.backend in DYNAMICS_BACKENDS, f"backend must be one of {DYNAMICS_BACKENDS}"),
         ]
         for ok, message in checks:
             if not ok:
@@ -281,7 +286,9 @@ class QuadrotorCoverageEnv(CoverageEnv):
         r = self.config.num_robots
         self._altitude = np.linspace(*d.altitude_range, r)  # (R,)
         start = np.column_stack([self._graph.positions[self._robot_node], self._altitude])
-        self._team = QuadrotorTeam(d.quadrotor, start, d.noise_std, d.delay, self._rng)
+        self._team = QuadrotorTeam(
+            d.quadrotor, start, d.noise_std, d.delay, self._rng, backend=d.backend
+        )
         self._target = self._robot_node.copy()
         self._tick = 0
         self._near_misses = 0

@@ -94,7 +94,9 @@ def clip_norm(vectors: np.ndarray, limit: float) -> np.ndarray:
     """Scales each row of ``vectors`` ``(N, D)`` down to norm ``limit`` (no-op for ``inf``)."""
     if math.isinf(limit):
         return vectors
-    squared = np.einsum("ij,ij->i", vectors, vectors)
+    squared = vectors[:, 0] * vectors[:, 0]  # (N,), summed left to right (as the kernel does)
+    for column in range(1, vectors.shape[1]):
+        squared = squared + vectors[:, column] * vectors[:, column]
     if squared.max() <= limit * limit:
         return vectors
     return vectors * np.minimum(1.0, limit / np.sqrt(squared + 1e-300))[:, None]
@@ -109,6 +111,8 @@ class QuadrotorTeam:
         noise_std: Standard deviation of the position measurement noise, metres.
         delay: Actuation delay in seconds (rounded to whole steps).
         rng: Generator of the measurement noise (required when ``noise_std > 0``).
+        backend: ``"numpy"`` (the reference), ``"numba"`` (a compiled kernel, the same bits)
+            or ``"auto"`` (``"numba"`` when installed).
     """
 
     def __init__(
@@ -118,6 +122,7 @@ class QuadrotorTeam:
         noise_std: float = 0.0,
         delay: float = 0.0,
         rng: np.random.Generator | None = None,
+        backend: str = "auto",
     ) -> None:
         if noise_std < 0 or delay < 0:
             raise ValueError(f"noise_std and delay must be >= 0, got {noise_std} and {delay}")
@@ -137,6 +142,7 @@ class QuadrotorTeam:
             [self.position.copy() for _ in range(delay_steps + 1)], maxlen=delay_steps + 1
         )
         self._drag_rate = params.drag / params.mass
+        self._kernel = _kernel(backend)
 
     @property
     def num_robots(self) -> int:
@@ -163,6 +169,9 @@ class QuadrotorTeam:
         """
         p = self.params
         targets = np.asarray(targets, dtype=np.float64)
+        if self._kernel is not None:
+            self._advance_compiled(targets, steps, track)
+            return
         drag_rate, dt = self._drag_rate, p.dt
         position, velocity = self.position, self.velocity
         acceleration = self.acceleration
@@ -178,3 +187,63 @@ class QuadrotorTeam:
             if track is not None:
                 track[k] = position
         self.velocity, self.acceleration = velocity, acceleration
+
+    def _advance_compiled(self, targets: np.ndarray, steps: int, track: np.ndarray | None) -> None:
+        """:meth:`advance` by the compiled kernel: the targets acting at each step and the
+        noise of each measurement are laid out first (the noise drawn in one call, the same
+        numbers as one call per step)."""
+        p, r = self.params, self.num_robots
+        if steps <= 0:
+            return
+        acting = np.empty((steps, r, 3))  # the oldest target in the pipeline at each step
+        old = list(self._pipeline)[1:]  # targets sent earlier that still wait
+        for k in range(min(steps, len(old))):
+            acting[k] = old[k]
+        acting[len(old) :] = targets
+        self._pipeline.extend([targets] * min(steps, self._pipeline.maxlen))
+        noise = np.empty((0, r, 3))  # (steps, R, 3) with noise, else none
+        if self.noise_std > 0:
+            noise = self._rng.normal(0.0, self.noise_std, (steps, r, 3))
+        position, velocity = self.position.copy(), self.velocity.copy()
+        acceleration = np.empty_like(position)
+        out = track if track is not None else np.empty((steps, r, 3))
+        self._kernel(
+            position,
+            velocity,
+            acceleration,
+            acting,
+            noise,
+            p.position_gain,
+            p.velocity_gain,
+            self._drag_rate,
+            p.dt,
+            p.max_speed,
+            p.max_accel,
+            out,
+        )
+        self.position, self.velocity, self.acceleration = position, velocity, acceleration
+
+
+#: Implementations of :meth:`QuadrotorTeam.advance`.
+DYNAMICS_BACKENDS = ("auto", "numpy", "numba")
+
+
+def _kernel(backend: str):  # noqa: ANN202 (a numba dispatcher or None)
+    """The compiled kernel for ``backend`` (``None``: numpy).
+
+    Raises:
+        ValueError: an unknown backend, or ``"numba"`` without numba installed.
+    """
+    if backend not in DYNAMICS_BACKENDS:
+        raise ValueError(f"dynamics backend must be one of {DYNAMICS_BACKENDS}, got {backend!r}")
+    if backend == "numpy":
+        return None
+    try:
+        from marl_cover._dynamics_numba import advance_team
+    except ImportError:
+        if backend == "numba":
+            raise ValueError(
+                "dynamics backend 'numba' needs the numba package (pip install numba)"
+            ) from None
+        return None
+    return advance_team

@@ -69,6 +69,42 @@ def test_measurement_noise_is_seeded() -> None:
     assert not np.array_equal(a["track"], clean["track"])
 
 
+@pytest.mark.parametrize(
+    ("drag", "max_speed", "noise_std", "delay"),
+    [
+        (0.25, 2.0, 0.0, 0.0),
+        (0.0, math.inf, 0.0, 0.0),
+        (2.0, 2.0, 0.05, 0.0),
+        (0.25, 2.0, 0.05, 0.2),
+    ],
+)
+def test_compiled_dynamics_give_the_reference_bits(
+    drag: float, max_speed: float, noise_std: float, delay: float
+) -> None:
+    pytest.importorskip("numba")
+    params = QuadrotorParams(drag=drag, max_speed=max_speed, max_accel=3.0)
+    rng = np.random.default_rng(7)
+    start = rng.uniform(-10, 10, (6, 3))
+    teams = [
+        QuadrotorTeam(params, start, noise_std, delay, np.random.default_rng(1), backend=b)
+        for b in ("numpy", "numba")
+    ]
+    for period in range(40):  # periods of 0..13 steps, with and without a track
+        targets, steps = rng.uniform(-20, 20, (6, 3)), int(rng.integers(0, 14))
+        tracks = [np.full((steps, 6, 3), np.nan) for _ in teams]
+        for team, track in zip(teams, tracks, strict=True):
+            team.advance(targets, steps, track if period % 2 else None)
+        reference, compiled = teams
+        for name in ("position", "velocity", "acceleration"):
+            assert np.array_equal(getattr(reference, name), getattr(compiled, name)), name
+        assert np.array_equal(tracks[0], tracks[1], equal_nan=True)
+        assert np.array_equal(reference.measure(), compiled.measure())  # same noise stream
+    with pytest.raises(ValueError, match="dynamics backend must be one of"):
+        QuadrotorTeam(params, start, backend="fortran")
+    with pytest.raises(ValueError, match="DynamicsConfig: backend must be one of"):
+        DynamicsConfig(backend="fortran")
+
+
 def test_bad_parameters_are_named() -> None:
     with pytest.raises(ValueError, match="max_speed"):
         QuadrotorParams(max_speed=0.0)
