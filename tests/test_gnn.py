@@ -348,6 +348,27 @@ def test_the_receptive_field_of_an_output_edge_on_a_path() -> None:
     assert field.out_positions.tolist() == [1]
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_compiled_and_torch_receptive_field_distances_agree(seed: int) -> None:
+    pytest.importorskip("numba")
+    from agents.models.gnn import output_distances
+
+    generator = torch.Generator().manual_seed(seed)
+    num_nodes, num_edges = 60, 150  # directed, with repeats, self-loops and isolated nodes
+    edge_index = torch.randint(0, num_nodes, (2, num_edges), generator=generator)
+    for hops in (1, 2, 5, 9, 40):
+        out_edges = torch.randint(0, num_edges, (7,), generator=generator)  # repeats too
+        reference = output_distances(edge_index, out_edges, hops, num_nodes, compiled=False)
+        compiled = output_distances(edge_index, out_edges, hops, num_nodes, compiled=True)
+        assert torch.equal(reference, compiled), hops
+        assert reference.max() <= hops
+    # the path of the test above: distances 0, 0, 1, 2, 3, 3 (capped at 3)
+    pairs = [(0, 1), (1, 0), (1, 2), (2, 1), (2, 3), (3, 2), (3, 4), (4, 3), (4, 5), (5, 4)]
+    path = torch.tensor(pairs).t()
+    found = output_distances(path, torch.tensor([1]), 3, 6, compiled=True)
+    assert found.tolist() == [0, 0, 1, 2, 3, 3]
+
+
 def test_weights_changed_in_place_reach_the_next_forward_without_gradients() -> None:
     torch.manual_seed(0)
     model = AggregationGNN(GNNConfig(hops=3, per_hop=True, hidden=8)).double()

@@ -39,6 +39,11 @@ from torch import nn
 
 from marl_cover.ego import NUM_ACTIONS, NUM_NODE_FEATURES
 
+try:  # optional (the ``fast`` extra): the receptive field's distances, compiled
+    from agents.models._field_numba import capped_distances as _capped_distances
+except ImportError:
+    _capped_distances = None
+
 KINDS = ("linear", "nonlinear")
 
 
@@ -210,6 +215,49 @@ class ReceptiveField:
     edge_counts: list[int]
 
 
+def output_distances(
+    edge_index: torch.Tensor,
+    out_edges: torch.Tensor,
+    hops: int,
+    num_nodes: int,
+    compiled: bool | None = None,
+) -> torch.Tensor:
+    """Each node's hop count along the edges to an endpoint of an output edge, capped at
+    ``hops`` (more than ``hops - 1``, or never), ``(num_nodes,)`` long.
+
+    Args:
+        edge_index: ``(2, E)`` long, ``[sender; receiver]``.
+        out_edges: ``(O,)`` long ids of the output edges.
+        hops: The cap.
+        num_nodes: Nodes of the graph.
+        compiled: A breadth-first search by the numba kernel (CPU tensors only) or the
+            reference's ``hops - 1`` Bellman-Ford rounds in torch; both give the same numbers.
+            ``None``: the kernel where it can run (numba installed, tensors on the CPU).
+    """
+    senders, receivers = edge_index[0], edge_index[1]
+    if compiled is None:
+        compiled = _capped_distances is not None and edge_index.device.type == "cpu"
+    elif compiled and (_capped_distances is None or edge_index.device.type != "cpu"):
+        raise ValueError("compiled distances need numba installed and CPU tensors")
+    if compiled:
+        sources = torch.cat([senders[out_edges], receivers[out_edges]])
+        found = _capped_distances(
+            senders.contiguous().numpy(),
+            receivers.contiguous().numpy(),
+            sources.numpy(),
+            num_nodes,
+            hops,
+        )
+        return torch.from_numpy(found)
+    distance = torch.full((num_nodes,), hops, dtype=torch.long, device=edge_index.device)
+    distance[senders[out_edges]] = 0
+    distance[receivers[out_edges]] = 0
+    for _ in range(hops - 1):  # Bellman-Ford rounds toward the outputs, up to hops - 1
+        reach = distance.index_select(0, receivers) + 1
+        distance = distance.scatter_reduce(0, senders, reach, "amin")
+    return distance
+
+
 def receptive_field(
     edge_index: torch.Tensor, out_edges: torch.Tensor, hops: int, num_nodes: int
 ) -> ReceptiveField:
@@ -232,14 +280,9 @@ def receptive_field(
         hops: Blocks of the network (its receptive field).
         num_nodes: Nodes of the graph.
     """
-    senders, receivers = edge_index[0], edge_index[1]
+    receivers = edge_index[1]
     far = hops  # distances are capped here: such nodes are never needed
-    distance = torch.full((num_nodes,), far, dtype=torch.long, device=edge_index.device)
-    distance[senders[out_edges]] = 0
-    distance[receivers[out_edges]] = 0
-    for _ in range(hops - 1):  # Bellman-Ford rounds toward the outputs, up to hops - 1
-        reach = distance.index_select(0, receivers) + 1
-        distance = distance.scatter_reduce(0, senders, reach, "amin")
+    distance = output_distances(edge_index, out_edges, hops, num_nodes)
     node_order = torch.argsort(distance, stable=True)
     node_counts = torch.bincount(distance, minlength=far + 1).cumsum(0).tolist()
     node_order = node_order[: node_counts[hops - 1]]
