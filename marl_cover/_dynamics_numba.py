@@ -74,3 +74,56 @@ def advance_team(  # noqa: PLR0913 (one flat kernel)
                 position[i, j] = position[i, j] + dt * v
                 track[k, i, j] = position[i, j]
     acceleration[:] = command
+
+
+@numba.njit(cache=True, nogil=True)
+def lattice_nearest(  # noqa: PLR0913 (one flat kernel)
+    xy: np.ndarray,  # (P, >=2) float64, points (their first two coordinates)
+    origin: np.ndarray,  # (2,) float64, the lattice's corner
+    cell_size: float,
+    table: np.ndarray,  # (A, B) int64, waypoint at each lattice point (-1: none)
+    positions: np.ndarray,  # (N, 2) float64, the waypoints
+    node: np.ndarray,  # (P,) int64, receives the nearest waypoint (-1: not on the lattice)
+    distance: np.ndarray,  # (P,) float64, receives the distance to it
+) -> int:
+    """``WaypointLocator.nearest``'s table lookup; returns how many points round to no
+    waypoint (left at ``-1`` for the k-d tree)."""
+    missing = 0
+    for p in range(xy.shape[0]):
+        i = np.int64(np.rint((xy[p, 0] - origin[0]) / cell_size))
+        j = np.int64(np.rint((xy[p, 1] - origin[1]) / cell_size))
+        found = -1
+        if 0 <= i < table.shape[0] and 0 <= j < table.shape[1]:
+            found = table[i, j]
+        node[p] = found
+        if found < 0:
+            missing += 1
+            continue
+        dx, dy = xy[p, 0] - positions[found, 0], xy[p, 1] - positions[found, 1]
+        distance[p] = np.sqrt(dx * dx + dy * dy)
+    return missing
+
+
+@numba.njit(cache=True, nogil=True)
+def count_new_close_pairs(
+    position: np.ndarray,  # (R, 3) float64
+    safety_distance: float,
+    same_altitude: float,
+    close: np.ndarray,  # (R, R) bool, the pairs close at the last check; updated in place
+) -> int:
+    """Pairs within ``safety_distance`` in the plane and ``same_altitude`` in height that were
+    not close at the last check (``QuadrotorCoverageEnv._count_near_misses``)."""
+    rows = position.shape[0]
+    new = 0
+    for i in range(rows):
+        for j in range(i + 1, rows):
+            dx, dy = position[i, 0] - position[j, 0], position[i, 1] - position[j, 1]
+            now = (
+                np.sqrt(dx * dx + dy * dy) < safety_distance
+                and abs(position[i, 2] - position[j, 2]) < same_altitude
+            )
+            if now and not close[i, j]:
+                new += 1
+            close[i, j] = now
+            close[j, i] = now
+    return new

@@ -49,7 +49,12 @@ from scipy.spatial import cKDTree
 
 from marl_cover.collisions import resolve_collisions
 from marl_cover.config import CoverageConfig, check_field_types, config_from_dict
-from marl_cover.dynamics import DYNAMICS_BACKENDS, QuadrotorParams, QuadrotorTeam
+from marl_cover.dynamics import (
+    DYNAMICS_BACKENDS,
+    QuadrotorParams,
+    QuadrotorTeam,
+    compiled_kernels,
+)
 from marl_cover.ego import action_targets
 from marl_cover.env import CoverageEnv, StepResult, _config_kwargs
 
@@ -65,10 +70,13 @@ class WaypointLocator:
 
     Args:
         graph: The map.
+        backend: The table lookup in numpy or by a compiled kernel (``DynamicsConfig.backend``;
+            the same numbers).
     """
 
-    def __init__(self, graph: Any) -> None:
+    def __init__(self, graph: Any, backend: str = "auto") -> None:
         self.graph = graph
+        self._kernels = compiled_kernels(backend)
         self._tree = cKDTree(graph.positions)
         self._origin = graph.positions.min(axis=0)
         index = np.rint((graph.positions - self._origin) / graph.cell_size).astype(np.int64)
@@ -87,6 +95,8 @@ class WaypointLocator:
         if self._table is None:
             dist, node = self._tree.query(xy)
             return node.astype(np.int64), dist
+        if self._kernels is not None:
+            return self._nearest_compiled(xy)
         index = np.rint((xy - self._origin) / self.graph.cell_size).astype(np.int64)
         inside = ((index >= 0) & (index < self._table.shape)).all(axis=1)
         node = np.full(len(xy), -1, dtype=np.int64)
@@ -96,6 +106,19 @@ class WaypointLocator:
             node[missing] = self._tree.query(xy[missing])[1]
         offset = xy - self.graph.positions[node]
         return node, np.sqrt(np.einsum("ij,ij->i", offset, offset))
+
+    def _nearest_compiled(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`nearest` on the lattice by the compiled kernel (the k-d tree for the rest)."""
+        node = np.empty(len(xy), dtype=np.int64)
+        dist = np.empty(len(xy))
+        positions = self.graph.positions
+        args = (self._origin, float(self.graph.cell_size), self._table, positions, node, dist)
+        if self._kernels.lattice_nearest(xy, *args):
+            missing = np.flatnonzero(node < 0)
+            node[missing] = self._tree.query(xy[missing])[1]
+            offset = xy[missing] - positions[node[missing]]
+            dist[missing] = np.sqrt(np.einsum("ij,ij->i", offset, offset))
+        return node, dist
 
 
 @dataclass(frozen=True)
@@ -207,6 +230,7 @@ class QuadrotorCoverageEnv(CoverageEnv):
         if isinstance(dynamics, dict):
             dynamics = DynamicsConfig.from_dict(dynamics)
         self.dynamics = dynamics or DynamicsConfig()
+        self._kernels = compiled_kernels(self.dynamics.backend)  # None: numpy
         self._locator: WaypointLocator | None = None
         self._tick = 0  # integration steps of the mission (the clock)
         # nominal moves (see snapshot) are at least a control period long
@@ -366,7 +390,7 @@ class QuadrotorCoverageEnv(CoverageEnv):
     def _nearest(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Nearest waypoint ``(R,)`` and its distance in the plane ``(R,)``."""
         if self._locator is None or self._locator.graph is not self._graph:
-            self._locator = WaypointLocator(self._graph)
+            self._locator = WaypointLocator(self._graph, self.dynamics.backend)
         return self._locator.nearest(points)
 
     def _count_near_misses(self) -> None:
@@ -374,6 +398,11 @@ class QuadrotorCoverageEnv(CoverageEnv):
         encounter)."""
         d = self.dynamics
         p = self._team.position
+        if self._kernels is not None:
+            self._near_misses += self._kernels.count_new_close_pairs(
+                p, d.safety_distance, d.same_altitude, self._close_pairs
+            )
+            return
         planar = np.linalg.norm(p[:, None, :2] - p[None, :, :2], axis=-1)
         vertical = np.abs(p[:, None, 2] - p[None, :, 2])
         close = (planar < d.safety_distance) & (vertical < d.same_altitude)

@@ -142,7 +142,8 @@ class QuadrotorTeam:
             [self.position.copy() for _ in range(delay_steps + 1)], maxlen=delay_steps + 1
         )
         self._drag_rate = params.drag / params.mass
-        self._kernel = _kernel(backend)
+        kernels = compiled_kernels(backend)
+        self._kernel = kernels.advance_team if kernels is not None else None
 
     @property
     def num_robots(self) -> int:
@@ -228,8 +229,9 @@ class QuadrotorTeam:
 DYNAMICS_BACKENDS = ("auto", "numpy", "numba")
 
 
-def _kernel(backend: str):  # noqa: ANN202 (a numba dispatcher or None)
-    """The compiled kernel for ``backend`` (``None``: numpy).
+def compiled_kernels(backend: str):  # noqa: ANN201 (a module or None)
+    """The module of compiled kernels for ``backend`` (``marl_cover._dynamics_numba``), or
+    ``None`` for numpy.
 
     Raises:
         ValueError: an unknown backend, or ``"numba"`` without numba installed.
@@ -239,11 +241,11 @@ def _kernel(backend: str):  # noqa: ANN202 (a numba dispatcher or None)
     if backend == "numpy":
         return None
     try:
-        from marl_cover._dynamics_numba import advance_team
+        from marl_cover import _dynamics_numba
     except ImportError:
         if backend == "numba":
             raise ValueError(
                 "dynamics backend 'numba' needs the numba package (pip install numba)"
             ) from None
         return None
-    return advance_team
+    return _dynamics_numba

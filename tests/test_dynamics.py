@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 import math
 from pathlib import Path
 
@@ -131,12 +132,15 @@ def test_locator_matches_a_kd_tree_on_and_off_the_lattice() -> None:
     shifted = lattice.positions.copy()
     shifted[0] += [0.3, 0.0]  # one waypoint off the lattice: the k-d tree answers everything
     off_lattice = marl_cover.SpatialGraph(shifted, lattice.neighbors, lattice.cell_size)
+    backends = ("numpy", "numba") if importlib.util.find_spec("numba") else ("numpy",)
     for graph in (lattice, off_lattice):
-        locator = WaypointLocator(graph)
-        node, dist = locator.nearest(points)
+        found = {b: WaypointLocator(graph, b).nearest(points) for b in backends}
+        node, dist = found["numpy"]
         truth = np.linalg.norm(points[:, None] - graph.positions[None], axis=-1)
         np.testing.assert_allclose(dist, truth.min(axis=1), atol=1e-9)
         assert np.all(truth[np.arange(len(points)), node] <= truth.min(axis=1) + 1e-9)
+        for other_node, other_dist in found.values():  # the compiled lookup: the same bits
+            assert np.array_equal(other_node, node) and np.array_equal(other_dist, dist)
 
 
 # ---------------------------------------------------------------------- the environment
@@ -191,15 +195,42 @@ def test_targets_go_through_the_collision_resolver(path_graph) -> None:
     assert infos["robot_1"]["blocked"] and not infos["robot_0"]["blocked"]
 
 
+@pytest.mark.parametrize("backend", ["numpy", "auto"])
 @pytest.mark.parametrize("altitudes, expected", [((5.0, 5.0), 1), ((3.0, 8.0), 0)])
-def test_near_misses_count_crossings_at_one_altitude(path_graph, altitudes, expected) -> None:
-    env = line_env(path_graph, num_robots=2, altitude_range=altitudes)
+def test_near_misses_count_crossings_at_one_altitude(
+    path_graph, altitudes, expected, backend
+) -> None:
+    env = line_env(path_graph, num_robots=2, altitude_range=altitudes, backend=backend)
     env.reset(seed=0, options={"robot_nodes": [3, 4], "interest_nodes": [0]})
     env.step({"robot_0": 1, "robot_1": 3})  # they swap along one edge
     while not env.ready.all():
         env.step({"robot_0": 0, "robot_1": 0})
     assert env.targets.tolist() == [4, 3]
     assert env.near_misses == expected
+
+
+def test_compiled_backend_flies_the_same_episode_as_numpy() -> None:
+    pytest.importorskip("numba")
+    config = {"map": "city", "num_robots": 10, "city_size": 40, "hops": 4}  # crowded
+    dynamics = {"altitude_range": (5.0, 5.0), "noise_std": 0.05, "delay": 0.1, "max_time": 30.0}
+    envs = [
+        QuadrotorCoverageEnv(dynamics={**dynamics, "backend": b}, **config)
+        for b in ("numpy", "numba")
+    ]
+    observations = [env.reset(seed=5)[0] for env in envs][0]
+    rng = np.random.default_rng(0)
+    while envs[0].agents:
+        actions = {
+            a: int(rng.choice(np.flatnonzero(o["action_mask"]))) for a, o in observations.items()
+        }
+        steps = [env.step(actions) for env in envs]
+        assert steps[0][1] == steps[1][1]  # rewards
+        observations = steps[0][0]
+        reference, compiled = envs
+        assert np.array_equal(reference.positions, compiled.positions)
+        assert np.array_equal(reference.snapped, compiled.snapped)
+        assert reference.near_misses == compiled.near_misses and reference.time == compiled.time
+    assert envs[0].near_misses > 0  # one altitude, random moves: the count was exercised
 
 
 @pytest.mark.parametrize("retarget", ["arrival", "rate"])
