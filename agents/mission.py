@@ -302,14 +302,15 @@ MISSION_METHODS = ("greedy", "greedy_stay", "gnn", "expert")
 
 
 def mission_model_path() -> Path:
-    """The GNN the mission flies by default: the behaviour-cloned coverage model fine-tuned by
-    MAPPO (``shipped/mappo/coverage_gnn.pt``), the coverage default until session 19. It was
-    chosen among fine-tuned models on a discrete stand-in for the mission, and it visits more
-    points in the mission than the averaged per-hop model that is now the default on the
-    paper's windows (464.0 against 452.3 on seeds 0..9; see docs/results/mission.md)."""
+    """The GNN the mission flies by default (``shipped/mission/coverage_gnn.pt``, since session
+    25): the MAPPO fine-tune that flew it before (``shipped/mappo/coverage_gnn.pt``) grown to a
+    29-hop receptive field (``AggregationGNN.deeper_copy``) and trained by DAgger on a discrete
+    stand-in for the mission (the mission's map and team, 131 moves), labelled by the routing
+    expert planning 29 moves ahead; it is chosen on seeds 100..129 and flies the test seeds
+    0..9 at more than 50 x real time on one core (see docs/results/mission.md)."""
     from agents.models.shipped import SHIPPED
 
-    return SHIPPED / "mappo" / "coverage_gnn.pt"
+    return SHIPPED / "mission" / "coverage_gnn.pt"
 
 
 def make_mission_policy(method: str, config: MissionConfig) -> Any:

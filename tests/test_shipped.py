@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import pytest
 
@@ -144,18 +145,35 @@ def test_the_coverage_model_averages_a_second_run_of_the_per_hop_recipe() -> Non
     assert metadata["selection"]["chosen"] == "steps 12000..16000 (5)"
 
 
-def test_the_mission_flies_the_mappo_fine_tune_which_ships_with_its_card() -> None:
-    """``mappo/coverage_gnn.pt``: the BC model fine-tuned by MAPPO (the coverage default until
-    session 19), the mission's model by default and in ``configs/mission.yaml``."""
+def test_the_mission_flies_the_29_hop_model_grown_from_the_mappo_fine_tune() -> None:
+    """``mission/coverage_gnn.pt`` (since session 25): ``mappo/coverage_gnn.pt`` (the BC model
+    fine-tuned by MAPPO, the mission's model before) grown to 29 hops and trained by DAgger on
+    the mission's discrete stand-in; the mission's model by default and in ``mission.yaml``."""
     from agents.configuration import load
     from agents.mission import MissionConfig, mission_model_path
 
-    model, metadata, card = shipped_beside("mappo")
-    assert mission_model_path() == SHIPPED / "mappo" / "coverage_gnn.pt"
+    model, metadata, card = shipped_beside("mission")
+    assert mission_model_path() == SHIPPED / "mission" / "coverage_gnn.pt"
     config = load(MissionConfig, SHIPPED.parents[2] / "configs" / "mission.yaml", [])
     assert SHIPPED.parents[2] / config.checkpoint == mission_model_path()
     assert MissionConfig().setup("gnn")["model_sha256"] == file_sha256(mission_model_path())
-    assert not model.config.per_hop and metadata["init"]["path"] == card["init"]["path"]
-    assert card["init"]["path"] == "agents/models/shipped/bc/coverage_gnn.pt"
-    assert "mappo" in card["model"]
-    assert city_rewards(model) == [80.0, 86.0, 88.0, 96.0, 81.0]
+    assert config.observation_hops() == 29  # the mission's ego-graphs span its field
+    mappo, _, mappo_card = shipped_beside("mappo")
+    assert model.config == replace(mappo.config, hops=29)
+    assert card["config"]["init"] == "agents/models/shipped/mappo/coverage_gnn.pt"
+    assert card["init_sha256"] == file_sha256(SHIPPED / "mappo" / "coverage_gnn.pt")
+    dagger = card["config"]["dagger"]
+    assert (dagger["expert_mode"], dagger["expert_horizon"], dagger["expert_clock"]) == (
+        "receding",
+        29,
+        False,
+    )
+    assert dagger["env"]["map"] == "paper_full" and dagger["env"]["num_robots"] == 10
+    assert metadata["dataset"].endswith("coverage_expert")
+    assert mappo_card["init"]["path"] == "agents/models/shipped/bc/coverage_gnn.pt"
+    assert city_rewards(mappo) == [80.0, 86.0, 88.0, 96.0, 81.0]
+    assert city_rewards(model) == GOLDEN_MISSION_CITY
+
+
+#: The mission model's rewards on procedural cities (float64, argmax), seeds 0..4, 4 robots.
+GOLDEN_MISSION_CITY = [89.0, 87.0, 88.0, 82.0, 86.0]
