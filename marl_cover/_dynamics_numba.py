@@ -1,7 +1,8 @@
-"""A compiled kernel for :meth:`marl_cover.dynamics.QuadrotorTeam.advance` (optional: needs
-numba).
+"""Compiled kernels of the continuous-time mode (optional: needs numba): the bodies
+(:meth:`marl_cover.dynamics.QuadrotorTeam.advance`), the lattice lookup of
+:class:`marl_cover.continuous.WaypointLocator` and the near-miss count.
 
-It runs the same arithmetic, in the same order, as the numpy implementation, which stays the
+Each runs the same arithmetic, in the same order, as the numpy implementation, which stays the
 reference (``tests/test_dynamics.py`` checks that both give the same bits). A control period of
 ten integration steps for a team of ten costs microseconds instead of the ~0.3 ms of numpy
 calls, which was most of the simulation's time in the quadrotor mission
