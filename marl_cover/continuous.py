@@ -141,9 +141,9 @@ class DynamicsConfig:
         same_altitude: Two robots within this height difference share an altitude, metres.
         noise_std: Standard deviation of the position measurement noise, metres.
         delay: Actuation delay in seconds.
-        backend: How the bodies are integrated: ``"numpy"`` (the reference), ``"numba"`` (a
-            compiled kernel, the same bits, ~20x faster) or ``"auto"`` (``"numba"`` when
-            installed).
+        backend: How the bodies are integrated, waypoints looked up and near-misses counted:
+            ``"numpy"`` (the reference), ``"numba"`` (compiled kernels, the same bits) or
+            ``"auto"`` (``"numba"`` when installed).
     """
 
     quadrotor: QuadrotorParams = field(default_factory=QuadrotorParams)

@@ -193,9 +193,9 @@ class QuadrotorTeam:
         """:meth:`advance` by the compiled kernel: the targets acting at each step and the
         noise of each measurement are laid out first (the noise drawn in one call, the same
         numbers as one call per step)."""
-        p, r = self.params, self.num_robots
         if steps <= 0:
             return
+        p, r = self.params, self.num_robots
         acting = np.empty((steps, r, 3))  # the oldest target in the pipeline at each step
         old = list(self._pipeline)[1:]  # targets sent earlier that still wait
         for k in range(min(steps, len(old))):

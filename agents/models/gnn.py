@@ -281,15 +281,15 @@ def receptive_field(
         num_nodes: Nodes of the graph.
     """
     receivers = edge_index[1]
-    far = hops  # distances are capped here: such nodes are never needed
+    # distances are capped at hops: such nodes are never needed
     distance = output_distances(edge_index, out_edges, hops, num_nodes)
     node_order = torch.argsort(distance, stable=True)
-    node_counts = torch.bincount(distance, minlength=far + 1).cumsum(0).tolist()
+    node_counts = torch.bincount(distance, minlength=hops + 1).cumsum(0).tolist()
     node_order = node_order[: node_counts[hops - 1]]
     new_id = torch.empty_like(distance)
     new_id[node_order] = torch.arange(node_order.shape[0], device=distance.device)
     edge_distance = distance[receivers]
-    edge_counts = torch.bincount(edge_distance, minlength=far + 1).cumsum(0).tolist()
+    edge_counts = torch.bincount(edge_distance, minlength=hops + 1).cumsum(0).tolist()
     edge_order = torch.argsort(edge_distance, stable=True)[: edge_counts[max(hops - 2, 0)]]
     position = torch.full_like(receivers, -1)
     position[edge_order] = torch.arange(edge_order.shape[0], device=distance.device)
