@@ -7,8 +7,8 @@
     e.g.  python scripts/select_average.py outputs/bc/mission_standin --map paper_full \\
         --num-robots 10 --max-steps 131 --episodes 20 --seed 100     # the mission's stand-in
 
-``RUN`` is a behaviour-cloning run trained with ``snapshots=true`` (its ``steps/`` folder). For
-each size ``n``, the mean of the last ``n`` snapshots plays one episode per seed
+``RUN`` is a behaviour-cloning or MAPPO run trained with ``snapshots=true`` (its ``steps/``
+folder). For each size ``n``, the mean of the last ``n`` snapshots plays one episode per seed
 (``--seed`` .. ``--seed + --episodes - 1``, the selection seeds, never the test seeds 0..99); the
 table gives each window's mean reward and its paired difference with the best, which is written
 to ``OUT/average.pt`` (a model file, ``scripts/evaluate.py checkpoint=OUT/average.pt``; its

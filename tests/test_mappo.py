@@ -19,7 +19,7 @@ from helpers import run_script  # noqa: E402
 from agents import configuration  # noqa: E402
 from agents.batched_env import BatchedCoverageEnv  # noqa: E402
 from agents.models.gnn import AggregationGNN, GNNConfig  # noqa: E402
-from agents.models.policy import EgoGraphLogits, StateLogits  # noqa: E402
+from agents.models.policy import EgoGraphLogits, StateLogits, load_model  # noqa: E402
 from agents.models.value import EgoValue, StateValue  # noqa: E402
 from agents.training.mappo import (  # noqa: E402
     MAPPOConfig,
@@ -217,6 +217,24 @@ def test_time_aware_critic_trains(tmp_path: Path, algorithm: str) -> None:
     assert summary["iteration"] == 2 and np.isfinite(summary["loss_critic"])
     checkpoint = torch.load(tmp_path / "run" / "checkpoint.pt", weights_only=False)
     assert checkpoint["critic_config"]["node_features"] == 5  # 4 node features + steps left
+
+
+def test_snapshots_keep_the_actor_of_every_evaluation(tmp_path: Path) -> None:
+    config = tiny_config(tmp_path, "collector.n_iters=4", "eval.every=2", "snapshots=true")
+    train_mappo(config)
+    run = tmp_path / "run"
+    assert sorted(p.name for p in (run / "steps").iterdir()) == [
+        "step_000002.pt",
+        "step_000004.pt",
+    ]
+    curve = {row["iteration"]: row for row in json.loads((run / "curve.json").read_text())}
+    last, last_meta = load_model(run / "steps" / "step_000004.pt")
+    final, _ = load_model(run / "model.pt")
+    for name, tensor in final.state_dict().items():
+        assert torch.equal(last.state_dict()[name], tensor), name
+    assert last_meta["iteration"] == 4 and last_meta["eval_reward"] == curve[4]["eval_reward"]
+    _, meta = load_model(run / "steps" / "step_000002.pt")
+    assert meta["eval_reward"] == curve[2]["eval_reward"]
 
 
 def test_config_errors_name_the_key(tmp_path: Path) -> None:

@@ -32,7 +32,9 @@ samples from a sharper policy with the same argmax.
 
 Outputs in ``out``: ``config.yaml``, ``checkpoint.pt`` (resumable: re-run with the same ``out``),
 ``best.pt`` and ``model.pt`` (actor model files that ``scripts/evaluate.py checkpoint=...``
-reads), ``log/`` (TorchRL CSV or TensorBoard logger), ``curve.json`` (per iteration: losses,
+reads), with ``snapshots=true`` the actor at every evaluation as ``steps/step_NNNNNN.pt``
+(NNNNNN: the iteration; ``scripts/select_average.py`` and ``scripts/average_models.py`` read
+them), ``log/`` (TorchRL CSV or TensorBoard logger), ``curve.json`` (per iteration: losses,
 sampled episode rewards, evaluation reward, collection/update/wall seconds) and
 ``summary.json``.
 """
@@ -166,6 +168,9 @@ class MAPPOConfig:
     threads: int = 1
     logger: str | None = "csv"
     progress: bool = True
+    # keep the actor of every evaluation as out/steps/step_NNNNNN.pt (NNNNNN: the iteration), so
+    # that a longer evaluation can choose among them, or average them, afterwards
+    snapshots: bool = False
 
     def __post_init__(self) -> None:
         if self.algorithm not in ALGORITHMS:
@@ -335,7 +340,9 @@ def train_mappo(config: MAPPOConfig) -> dict[str, Any]:
     out = Path(config.out)
     out.mkdir(parents=True, exist_ok=True)
     record = configuration.as_dict(config)
-    check_same_run(out / "config.yaml", record, ignored=("progress", "out", "collector"))
+    check_same_run(
+        out / "config.yaml", record, ignored=("progress", "out", "collector", "snapshots")
+    )
     write_text_atomic(out / "config.yaml", yaml.safe_dump(record, sort_keys=False))
     torch.manual_seed(config.seed)
     torch.set_num_threads(config.threads)
@@ -426,6 +433,12 @@ def train_mappo(config: MAPPOConfig) -> dict[str, Any]:
         )
         if iteration % config.eval.every == 0 or iteration == c.n_iters:
             metrics["eval_reward"] = _evaluate(eval_env, actor_gnn, config)
+            if config.snapshots:
+                save_model(
+                    out / "steps" / f"step_{iteration:06d}.pt",
+                    _cpu(actor_gnn),
+                    {**metadata, "iteration": iteration, "eval_reward": metrics["eval_reward"]},
+                )
             if metrics["eval_reward"] > best_reward:
                 best_reward = metrics["eval_reward"]
                 save_model(out / "best.pt", _cpu(actor_gnn), {**metadata, "iteration": iteration})
