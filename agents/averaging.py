@@ -1,11 +1,12 @@
 """Choosing a weight average of a training run's snapshots on selection seeds.
 
-A behaviour-cloning run with ``snapshots=true`` keeps the model of every validation step
-(``RUN/steps/step_NNNNNN.pt``). The parameter-wise mean of the last few of them (a stochastic
-weight average, :func:`agents.models.policy.average_models`) often plays better than any one
-snapshot. How many to average is chosen here the way the shipped exploration model's window was:
-each candidate window, the last ``n`` snapshots for each ``n`` asked for, is averaged and played
-on the same selection seeds, and the window with the highest mean reward wins. The test seeds
+A behaviour-cloning or MAPPO run with ``snapshots=true`` keeps the model of every validation
+step or evaluated iteration (``RUN/steps/step_NNNNNN.pt``). The parameter-wise mean of the
+last few of them (a stochastic weight average, :func:`agents.models.policy.average_models`)
+often plays better than any one snapshot. How many to average is chosen here the way the
+shipped exploration model's window was: each candidate window, the last ``n`` snapshots for each
+``n`` asked for, is averaged and played on the same selection seeds, and the window with the
+highest mean reward wins. The test seeds
 are not touched; run ``scripts/evaluate.py`` on the chosen file for them.
 
 Every window's rewards are written to ``cache/window_FIRST_LAST.json`` with the setup that made
