@@ -432,16 +432,18 @@ def train_mappo(config: MAPPOConfig) -> dict[str, Any]:
             }
         )
         if iteration % config.eval.every == 0 or iteration == c.n_iters:
-            metrics["eval_reward"] = _evaluate(eval_env, actor_gnn, config)
+            # one CPU copy for the evaluation, the snapshot, best.pt and the checkpoint
+            cpu_actor = _cpu(actor_gnn)
+            metrics["eval_reward"] = _evaluate(eval_env, cpu_actor, config)
             if config.snapshots:
                 save_model(
                     out / "steps" / f"step_{iteration:06d}.pt",
-                    _cpu(actor_gnn),
+                    cpu_actor,
                     {**metadata, "iteration": iteration, "eval_reward": metrics["eval_reward"]},
                 )
             if metrics["eval_reward"] > best_reward:
                 best_reward = metrics["eval_reward"]
-                save_model(out / "best.pt", _cpu(actor_gnn), {**metadata, "iteration": iteration})
+                save_model(out / "best.pt", cpu_actor, {**metadata, "iteration": iteration})
         previous_wall = curve[-1].get("wall_seconds", 0.0) if curve else 0.0
         metrics["wall_seconds"] = previous_wall + time.perf_counter() - start_time
         curve.append({"iteration": iteration, **metrics})
@@ -455,10 +457,10 @@ def train_mappo(config: MAPPOConfig) -> dict[str, Any]:
                 reward=f"{metrics['episode_reward']:.1f}",
                 eval=f"{metrics.get('eval_reward', math.nan):.1f}",
             )
-        if "eval_reward" in metrics or iteration == c.n_iters:
+        if "eval_reward" in metrics:  # every evaluation, the last iteration's included
             save_model(  # a model file (load_model reads the actor) plus the training state
                 checkpoint_path,
-                _cpu(actor_gnn),
+                cpu_actor,
                 {**metadata, "iteration": iteration},
                 critic=critic_gnn.state_dict(),
                 critic_config=asdict(critic_gnn.config),
