@@ -11,13 +11,18 @@ the decentralized GNN) and sorts every decision of a ready robot two ways:
 A deterministic policy that goes back on most of its blind decisions oscillates between two
 waypoints until something comes into view. ``blind`` swaps the policy's own blind decisions for
 another rule, to measure what they cost: ``"random"``, a uniformly random available move (the
-paper's greedy fallback), or ``"sample"``, a draw from the GNN's own distribution instead of its
-argmax. Both use the recorder's generator, reset with each mission's seed.
+paper's greedy fallback), ``"sample"``, a draw from the GNN's own distribution instead of its
+argmax (both use the recorder's generator, reset with each mission's seed), or ``"nearest"``,
+one hop along a shortest path to the nearest unvisited point of interest anywhere on the map
+(knowledge of the whole map that no ego-graph holds: what such knowledge is at most worth to
+a blind robot; the lowest action slot on ties, masked moves skipped, stay when no point is
+left or no move is available).
 
-The recorder is as deterministic as its policy with ``blind="policy"`` and random otherwise, so
-:func:`agents.mission.run_mission` skips asking again while nothing the robots see has changed
-exactly when it would for the policy alone, and a mission with ``blind="policy"`` is the
-policy's own mission.
+The recorder is as deterministic as its policy with ``blind="policy"``, and counts as not
+deterministic otherwise (the moves are random, or ``"nearest"`` reads beyond the robots' view),
+so :func:`agents.mission.run_mission` skips asking again while nothing the robots see has
+changed exactly when it would for the policy alone, and a mission with ``blind="policy"`` is
+the policy's own mission.
 """
 
 from __future__ import annotations
@@ -26,12 +31,13 @@ from collections import Counter
 from typing import Any
 
 import numpy as np
+from scipy.sparse.csgraph import dijkstra
 
 from agents.greedy import TARGET_COLUMNS
 from marl_cover.continuous import QuadrotorCoverageEnv
 
 KINDS = ("stay", "back", "forward")
-BLIND_RULES = ("policy", "random", "sample")
+BLIND_RULES = ("policy", "random", "sample", "nearest")
 
 
 def target_in_view(observation: dict[str, np.ndarray]) -> bool:
@@ -46,8 +52,8 @@ class DecisionRecorder:
     Args:
         policy: The wrapped policy (its ``reset(seed)`` is called when present).
         env: The environment it flies in (for the robots' snapped waypoints and the graph).
-        blind: What a blind robot does: ``"policy"`` (the policy's own action), ``"random"``
-            or ``"sample"`` (a :class:`agents.models.policy.GNNPolicy` only).
+        blind: What a blind robot does: ``"policy"`` (the policy's own action), ``"random"``,
+            ``"sample"`` (a :class:`agents.models.policy.GNNPolicy` only) or ``"nearest"``.
         seed: Seed of the generator of blind moves (reset with each mission's seed).
 
     Attributes:
@@ -113,6 +119,8 @@ class DecisionRecorder:
         return actions
 
     def _blind_moves(self, observations: dict[str, dict[str, np.ndarray]]) -> dict[str, int]:
+        if self.blind == "nearest":
+            return self._nearest_moves(observations)
         if self.blind == "random":
             moves = {}
             for agent, observation in observations.items():
@@ -126,6 +134,26 @@ class DecisionRecorder:
             agent: int(self._rng.choice(len(p), p=p))
             for agent, p in zip(observations, probs, strict=True)
         }
+
+    def _nearest_moves(self, observations: dict[str, dict[str, np.ndarray]]) -> dict[str, int]:
+        """One hop toward the nearest unvisited point of interest on the whole map."""
+        snapshot = self.env.snapshot()
+        targets = np.flatnonzero(snapshot.unvisited_interest)
+        if len(targets) == 0:
+            return dict.fromkeys(observations, 0)
+        distance = dijkstra(  # (num_nodes,) hops to the nearest target
+            snapshot.graph.adjacency, unweighted=True, indices=targets, min_only=True
+        )
+        moves = {}
+        for agent, observation in observations.items():
+            neighbors = snapshot.graph.neighbors[int(self.env.snapped[self._index[agent]])]
+            reach = np.where(  # (4,) hops to a target from each available neighbour
+                (neighbors >= 0) & observation["action_mask"][1:].astype(bool),
+                distance[np.maximum(neighbors, 0)],
+                np.inf,
+            )
+            moves[agent] = int(np.argmin(reach)) + 1 if np.isfinite(reach).any() else 0
+        return moves
 
     def table(self) -> dict[str, dict[str, int]]:
         """``{"in view" | "blind": {kind: decisions}}``."""

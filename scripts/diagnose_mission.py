@@ -3,8 +3,8 @@
 Flies the mission of ``configs/mission.yaml`` (same overrides as ``scripts/run_mission.py``) with
 each decentralized method (``greedy``, ``greedy_stay``, ``gnn``), every decision of a ready robot
 sorted by whether a point of interest is in its ego-graph and by its move
-(:mod:`agents.mission_diagnostics`); ``--blind random|sample`` replaces the policy's own blind
-decisions, to measure what they cost. Prints the points visited per seed and the table of
+(:mod:`agents.mission_diagnostics`); ``--blind random|sample|nearest`` replaces the policy's own
+blind decisions, to measure what they cost. Prints the points visited per seed and the table of
 decisions, and writes them as JSON.
 
     python scripts/diagnose_mission.py [--blind policy] [--out FILE] [key=value ...]

@@ -115,3 +115,20 @@ def test_recorded_mission_is_the_policy_mission() -> None:
     assert recorded.decisions == alone.decisions > 0
     # in arrival mode a step ends when a robot arrives: every ask has a ready robot
     assert sum(sum(row.values()) for row in recorder.table().values()) >= alone.decisions
+
+
+def test_nearest_blind_moves_head_for_the_nearest_point_anywhere(path_graph) -> None:
+    """With ``blind="nearest"`` a robot that would stay, blind to the point at 7 (hops = 2),
+    walks east instead on every blind decision (2 -> 3 -> 4 -> 5) and stays from 5 on, where
+    it sees the point; from 4 with the point at 0 it goes west."""
+    env = line_env(path_graph)
+    recorder = DecisionRecorder(Stay(), env, blind="nearest")
+    assert not recorder.deterministic
+    fly(env, recorder, interest=[7])
+    table = recorder.table()
+    assert table["blind"] == {"stay": 0, "back": 0, "forward": 3}
+    assert table["in view"]["stay"] > 0 and table["in view"]["forward"] == 0
+    assert int(env.snapped[0]) == 5 and not env.snapshot().visited[7]
+    recorder.reset(0)
+    observations, _ = env.reset(seed=0, options={"robot_nodes": [4], "interest_nodes": [0]})
+    assert recorder.act({"robot_0": observations["robot_0"]}) == {"robot_0": WEST}
