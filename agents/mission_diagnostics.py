@@ -31,7 +31,6 @@ from collections import Counter
 from typing import Any
 
 import numpy as np
-from scipy.sparse.csgraph import dijkstra
 
 from agents.greedy import TARGET_COLUMNS
 from marl_cover.continuous import QuadrotorCoverageEnv
@@ -138,12 +137,8 @@ class DecisionRecorder:
     def _nearest_moves(self, observations: dict[str, dict[str, np.ndarray]]) -> dict[str, int]:
         """One hop toward the nearest unvisited point of interest on the whole map."""
         snapshot = self.env.snapshot()
-        targets = np.flatnonzero(snapshot.unvisited_interest)
-        if len(targets) == 0:
-            return dict.fromkeys(observations, 0)
-        distance = dijkstra(  # (num_nodes,) hops to the nearest target
-            snapshot.graph.adjacency, unweighted=True, indices=targets, min_only=True
-        )
+        # (num_nodes,) hops to the nearest target; all inf when none is left (every robot stays)
+        distance = snapshot.graph.nearest_distance(np.flatnonzero(snapshot.unvisited_interest))
         moves = {}
         for agent, observation in observations.items():
             neighbors = snapshot.graph.neighbors[int(self.env.snapped[self._index[agent]])]
