@@ -199,6 +199,38 @@ def test_cli_evaluates_an_ensemble_of_checkpoints(tmp_path) -> None:
     assert result.returncode != 0 and "gone.pt" in result.stderr
 
 
+def test_merged_ensemble_file_plays_the_ensembles_episodes(tmp_path) -> None:
+    torch = pytest.importorskip("torch")
+    from agents.models import AggregationGNN, GNNConfig
+    from agents.models.policy import EnsemblePolicy, GNNPolicy, load_model, save_model
+
+    torch.manual_seed(1)
+    models = [AggregationGNN(GNNConfig(kind="nonlinear", hops=4)) for _ in range(3)]
+    paths = [tmp_path / f"m{i}.pt" for i in range(3)]
+    for model, path in zip(models, paths, strict=True):
+        save_model(path, model, {})
+    merged_path = tmp_path / "merged.pt"
+    done = run_script("average_models.py", "--logits", str(merged_path), *map(str, paths))
+    assert done.returncode == 0, done.stderr
+    assert "width 48" in done.stdout
+    merged, metadata = load_model(merged_path)
+    assert metadata == {"merged_of": [str(p) for p in paths]}
+    env = marl_cover.parallel_env(hops=4, max_steps=12)
+    expected = evaluate(env, EnsemblePolicy(models), range(4))
+    played = evaluate(env, GNNPolicy(merged), range(4))
+    assert [r.reward for r in played.results] == [r.reward for r in expected.results]
+    observations, _ = env.reset(seed=9)
+    for _ in range(6):  # the same action for every robot, not just the same totals
+        actions = GNNPolicy(merged).act(observations)
+        assert actions == EnsemblePolicy(models).act(observations)
+        observations = env.step(actions)[0]
+    wide = tmp_path / "wide.pt"
+    save_model(wide, AggregationGNN(GNNConfig(kind="nonlinear", hops=4, hidden=8)), {})
+    bad = [str(merged_path), str(paths[0]), str(wide)]
+    refused = run_script("average_models.py", "--logits", *bad)
+    assert refused.returncode != 0 and "member 1 is a" in refused.stderr
+
+
 def write_rewards(path: Path, rewards: dict[int, float]) -> Path:
     lines = ["seed,reward,coverage"] + [f"{s},{r},0.5" for s, r in rewards.items()]
     path.write_text("\n".join(lines) + "\n")

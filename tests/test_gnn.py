@@ -266,6 +266,43 @@ def test_deeper_copy_keeps_the_logits_and_trains_the_far_hops(config) -> None:
         near.deeper_copy(3)
 
 
+@pytest.mark.parametrize(
+    "config",
+    [
+        GNNConfig(kind="linear", hops=4, hidden=6),
+        GNNConfig(kind="nonlinear", hops=4, hidden=6),
+        GNNConfig(kind="nonlinear", hops=3, hidden=5, residual=True, per_hop=True, time_horizon=50),
+    ],
+    ids=str,
+)
+def test_merged_models_give_the_mean_of_their_logits_in_one_pass(config) -> None:
+    torch.manual_seed(8)
+    members = [AggregationGNN(config).double() for _ in range(3)]
+    merged = AggregationGNN.merged(members)
+    assert merged.config == replace(config, hidden=3 * config.hidden)
+    nodes, edge_index, edge_attr = state_graph(num_robots=3, hops=4, city_size=90, seed=5)
+    if config.time_horizon is not None:
+        nodes = torch.cat([nodes, torch.full_like(nodes[:, :1], 0.5)], dim=1)
+    graph = (nodes, edge_index, edge_attr)
+    mean = torch.stack([member(*graph) for member in members]).mean(dim=0)
+    torch.testing.assert_close(merged(*graph), mean, atol=1e-12, rtol=0)
+    torch.testing.assert_close(merged.reference_forward(*graph), mean, atol=1e-12, rtol=0)
+    # member 1 of the edge MLP's first layer reads its own units of [e, h_receiver, h_sender]
+    if config.kind == "nonlinear" and not config.per_hop:
+        h = config.hidden
+        block = merged.edge_block[0].weight[h : 2 * h].view(h, 3, 3, h)  # (out, part, member, in)
+        assert torch.equal(block[:, :, 1], members[1].edge_block[0].weight.view(h, 3, h))
+        assert torch.all(block[:, :, [0, 2]] == 0)
+    # one member: the same network
+    torch.testing.assert_close(AggregationGNN.merged(members[:1])(*graph), members[0](*graph))
+    with pytest.raises(ValueError, match="member 1 is a"):
+        AggregationGNN.merged([members[0], AggregationGNN(replace(config, hops=2)).double()])
+    with pytest.raises(ValueError, match="norm"):
+        AggregationGNN.merged([AggregationGNN(GNNConfig(hops=2, norm=True))] * 2)
+    with pytest.raises(ValueError, match="at least one"):
+        AggregationGNN.merged([])
+
+
 def test_grown_to_widens_and_splits_the_hops_or_says_why_not() -> None:
     torch.manual_seed(5)
     shared = AggregationGNN(GNNConfig(hops=3, hidden=8)).double()

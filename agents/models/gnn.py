@@ -431,6 +431,59 @@ class AggregationGNN(nn.Module):
                 layer.bias[rows] = old.bias
         return copy.train(self.training)
 
+    @staticmethod
+    def merged(models: list[AggregationGNN]) -> AggregationGNN:
+        """One network whose logits are the mean of ``models``' logits (an ensemble in one).
+
+        The members sit side by side in a model ``len(models)`` times as wide: every MLP's
+        weights are block-diagonal (member ``m`` reads and writes only its own units within
+        each latent), the encoders share the raw features, and the readout averages the
+        members' logits. Its argmax action is the ensemble's of
+        :class:`~agents.models.policy.EnsemblePolicy` (a mean of log-softmaxes differs from
+        the mean of logits by a constant per robot); one forward pass, no per-member calls.
+
+        Raises:
+            ValueError: no member, members of different configs, or a member with ``norm``
+                (a layer norm across the merged width would mix the members).
+        """
+        if not models:
+            raise ValueError("merging needs at least one model")
+        config = models[0].config
+        for index, model in enumerate(models):
+            if model.config != config:
+                raise ValueError(f"member {index} is a {model.config}, member 0 a {config}")
+        if config.norm:
+            raise ValueError("cannot merge models with norm (a layer norm would mix members)")
+        num, width = len(models), config.hidden
+        parameter = models[0].readout.weight
+        merged = AggregationGNN(replace(config, hidden=num * width))
+        merged = merged.to(device=parameter.device, dtype=parameter.dtype)
+        raw_inputs = {"node_encoder.0", "edge_encoder.0"}
+        members = [dict(model.named_modules()) for model in models]
+        with torch.no_grad():
+            for name, layer in merged.named_modules():
+                if not isinstance(layer, nn.Linear):
+                    continue
+                layer.weight.zero_()
+                for m, modules in enumerate(members):
+                    old = modules[name]
+                    if name == "readout":  # one logit: the mean of the members'
+                        rows = torch.zeros(1, dtype=torch.long)
+                    else:
+                        rows = m * width + torch.arange(width)
+                    if name in raw_inputs:
+                        columns = torch.arange(old.in_features)
+                    else:  # segment j of the input: member m's units at j * num * width + m * width
+                        index = torch.arange(old.in_features)
+                        columns = index // width * num * width + m * width + index % width
+                    weight = old.weight / num if name == "readout" else old.weight
+                    layer.weight[rows.unsqueeze(1), columns] += weight
+                    if name == "readout":
+                        layer.bias += old.bias / num
+                    else:
+                        layer.bias[rows] = old.bias
+        return merged.train(models[0].training)
+
     def grown_to(self, config: GNNConfig, seed: int = 0) -> AggregationGNN:
         """This model grown to ``config`` with the same logits: a block per hop
         (:meth:`per_hop_copy`), more hops (:meth:`deeper_copy`) and more width
