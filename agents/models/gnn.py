@@ -456,7 +456,8 @@ class AggregationGNN(nn.Module):
             raise ValueError("cannot merge models with norm (a layer norm would mix members)")
         num, width = len(models), config.hidden
         parameter = models[0].readout.weight
-        merged = AggregationGNN(replace(config, hidden=num * width))
+        with torch.random.fork_rng(devices=[]):  # every weight is set below: no global draw
+            merged = AggregationGNN(replace(config, hidden=num * width))
         merged = merged.to(device=parameter.device, dtype=parameter.dtype)
         raw_inputs = {"node_encoder.0", "edge_encoder.0"}
         members = [dict(model.named_modules()) for model in models]
