@@ -22,8 +22,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from agents.models.gnn import AggregationGNN  # noqa: E402
-from agents.models.policy import average_models, load_model, save_model  # noqa: E402
+from agents.models.policy import average_models, merge_models, save_model  # noqa: E402
 
 
 def main() -> None:
@@ -34,13 +33,9 @@ def main() -> None:
         "--logits", action="store_true", help="average the logits (merge), not the weights"
     )
     args = parser.parse_args()
-    if args.logits:
-        model = AggregationGNN.merged([load_model(path)[0] for path in args.models])
-        metadata = {"merged_of": [str(path) for path in args.models]}
-        what = f"the members of {len(args.models)}"
-    else:
-        model, metadata = average_models(args.models)
-        what = f"the mean of {len(args.models)}"
+    merge = merge_models if args.logits else average_models
+    model, metadata = merge(args.models)
+    what = f"the {'members' if args.logits else 'mean'} of {len(args.models)}"
     save_model(args.out, model, metadata)
     config = model.config
     print(f"wrote {args.out}: {what} {config.kind} K={config.hops} models (width {config.hidden})")

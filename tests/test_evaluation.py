@@ -228,7 +228,7 @@ def test_merged_ensemble_file_plays_the_ensembles_episodes(tmp_path) -> None:
     save_model(wide, AggregationGNN(GNNConfig(kind="nonlinear", hops=4, hidden=8)), {})
     bad = [str(merged_path), str(paths[0]), str(wide)]
     refused = run_script("average_models.py", "--logits", *bad)
-    assert refused.returncode != 0 and "member 1 is a" in refused.stderr
+    assert refused.returncode != 0 and "wide.pt holds a" in refused.stderr
 
 
 def write_rewards(path: Path, rewards: dict[int, float]) -> Path:

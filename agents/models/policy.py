@@ -373,15 +373,37 @@ def average_models(paths: list[str | Path]) -> tuple[AggregationGNN, dict[str, A
     """
     if len(paths) < 2:
         raise ValueError(f"averaging needs at least two model files, got {len(paths)}")
+    models, metadata = _load_alike(paths)
+    average = AggregationGNN(models[0].config)
+    states = [model.state_dict() for model in models]
+    average.load_state_dict(
+        {key: torch.stack([state[key] for state in states]).mean(dim=0) for key in states[0]}
+    )
+    return average.eval(), {**metadata, "average_of": [str(p) for p in paths]}
+
+
+def merge_models(paths: list[str | Path]) -> tuple[AggregationGNN, dict[str, Any]]:
+    """The networks saved at ``paths`` as one ensemble network
+    (:meth:`AggregationGNN.merged`: the mean of their logits in one pass); its metadata is
+    ``{"merged_of": [the files]}``.
+
+    Raises:
+        ValueError: no file, or a file whose network has another config than the first's,
+            naming it.
+    """
+    if not paths:
+        raise ValueError("merging needs at least one model file")
+    models, _ = _load_alike(paths)
+    return AggregationGNN.merged(models).eval(), {"merged_of": [str(p) for p in paths]}
+
+
+def _load_alike(paths: list[str | Path]) -> tuple[list[AggregationGNN], dict[str, Any]]:
+    """The networks at ``paths`` and the first one's metadata; a ``ValueError`` names a file
+    whose network has another config than the first's."""
     (first, metadata), *others = [load_model(path) for path in paths]
     for path, (model, _) in zip(paths[1:], others, strict=True):
         if model.config != first.config:
             raise ValueError(
                 f"{path} holds a {model.config} network, not the {first.config} of {paths[0]}"
             )
-    average = AggregationGNN(first.config)
-    states = [first.state_dict(), *(model.state_dict() for model, _ in others)]
-    average.load_state_dict(
-        {key: torch.stack([state[key] for state in states]).mean(dim=0) for key in states[0]}
-    )
-    return average.eval(), {**metadata, "average_of": [str(p) for p in paths]}
+    return [first, *(model for model, _ in others)], metadata
