@@ -459,30 +459,21 @@ class AggregationGNN(nn.Module):
         with torch.random.fork_rng(devices=[]):  # every weight is set below: no global draw
             merged = AggregationGNN(replace(config, hidden=num * width))
         merged = merged.to(device=parameter.device, dtype=parameter.dtype)
-        raw_inputs = {"node_encoder.0", "edge_encoder.0"}
         members = [dict(model.named_modules()) for model in models]
         with torch.no_grad():
             for name, layer in merged.named_modules():
                 if not isinstance(layer, nn.Linear):
                     continue
                 layer.weight.zero_()
+                layer.bias.zero_()
+                # the readout keeps its one logit: each member adds its share of the mean
+                share = num if layer.out_features == members[0][name].out_features else 1
                 for m, modules in enumerate(members):
                     old = modules[name]
-                    if name == "readout":  # one logit: the mean of the members'
-                        rows = torch.zeros(1, dtype=torch.long)
-                    else:
-                        rows = m * width + torch.arange(width)
-                    if name in raw_inputs:
-                        columns = torch.arange(old.in_features)
-                    else:  # segment j of the input: member m's units at j * num * width + m * width
-                        index = torch.arange(old.in_features)
-                        columns = index // width * num * width + m * width + index % width
-                    weight = old.weight / num if name == "readout" else old.weight
-                    layer.weight[rows.unsqueeze(1), columns] += weight
-                    if name == "readout":
-                        layer.bias += old.bias / num
-                    else:
-                        layer.bias[rows] = old.bias
+                    rows = _member_indices(old.out_features, layer.out_features, width, m)
+                    columns = _member_indices(old.in_features, layer.in_features, width, m)
+                    layer.weight[rows.unsqueeze(1), columns] += old.weight / share
+                    layer.bias[rows] += old.bias / share
         return merged.train(models[0].training)
 
     def grown_to(self, config: GNNConfig, seed: int = 0) -> AggregationGNN:
@@ -717,6 +708,15 @@ def _widened_indices(size: int, new_size: int, old_width: int) -> torch.Tensor:
         return index
     width = new_size // (size // old_width)
     return index // old_width * width + index % old_width
+
+
+def _member_indices(size: int, new_size: int, width: int, member: int) -> torch.Tensor:
+    """Where member ``member``'s ``size`` entries of one side of a linear layer go in a merge of
+    members ``width`` wide (``new_size`` entries): a side that kept its size (raw features, the
+    readout's logit) is shared; a concatenation of latents puts the member's units at its offset
+    within each widened segment."""
+    index = _widened_indices(size, new_size, width)
+    return index if new_size == size else index + member * width
 
 
 def flatten_padded(
