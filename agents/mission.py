@@ -9,7 +9,7 @@ for actions only when some robot is ready, and hands the environment every robot
 - the routing expert plans on the target waypoints through :class:`MissionExpert`.
 
 Deterministic observation-only policies are not asked again while nothing they observe has
-changed (same snapped waypoints, same visited set, same ready robots): at 10 Hz most control
+changed (same observed waypoints, same visited set, same ready robots): at 10 Hz most control
 periods change nothing, and the actions would be the same.
 """
 
@@ -158,7 +158,7 @@ def run_mission(
     actions: dict[str, int] = {}
     while env.agents:
         snap_key = (
-            env.snapped.tobytes(),
+            env.observed_nodes.tobytes(),
             env.num_visited,
             env.ready.tobytes(),
         )

@@ -6,7 +6,9 @@ is a body (:mod:`marl_cover.dynamics`) that flies to the waypoint it is given:
 - **Positions to waypoints.** A robot's measured position is snapped to the nearest waypoint
   (Euclidean, in the plane); the observations and ``state()`` are built on the snapped
   waypoints, in the discrete environment's encoding, so discrete policies drive the bodies
-  unchanged. An action is a move from the snapped waypoint.
+  unchanged. An action is a move from the snapped waypoint. With ``observe="targets"`` the
+  robots that are on their way appear at their target waypoints instead, those counted as
+  visited (the pending moves completed; the reward and the record of visits are unchanged).
 - **Targets.** Each robot holds a target waypoint that its position controller tracks at its
   own altitude. Targets are pairwise distinct: new targets go through the priority-index
   collision resolver (:mod:`marl_cover.collisions`) against the current targets, and a blocked
@@ -59,6 +61,7 @@ from marl_cover.ego import action_targets
 from marl_cover.env import CoverageEnv, StepResult, _config_kwargs
 
 RETARGET_MODES = ("arrival", "rate")
+OBSERVE_MODES = ("snapped", "targets")
 
 
 class WaypointLocator:
@@ -144,6 +147,11 @@ class DynamicsConfig:
         backend: How the bodies are integrated, waypoints looked up and near-misses counted:
             ``"numpy"`` (the reference), ``"numba"`` (compiled kernels, the same bits) or
             ``"auto"`` (``"numba"`` when installed).
+        observe: Where the observations put the robots that are on their way:
+            ``"snapped"`` (the waypoint nearest to each, the paper's rule) or ``"targets"``
+            (the waypoint each is bound to, counted as visited: the pending moves completed,
+            as the discrete environment shows robots after a step). Robots that are ready
+            are at their snapped waypoints in both.
     """
 
     quadrotor: QuadrotorParams = field(default_factory=QuadrotorParams)
@@ -158,6 +166,7 @@ class DynamicsConfig:
     noise_std: float = 0.0
     delay: float = 0.0
     backend: str = "auto"
+    observe: str = "snapped"
 
     def __post_init__(self) -> None:
         if isinstance(self.quadrotor, dict):
@@ -184,6 +193,7 @@ class DynamicsConfig:
             (self.noise_std >= 0, f"noise_std must be >= 0, got {self.noise_std}"),
             (self.delay >= 0, f"delay must be >= 0, got {self.delay}"),
             (self.backend in DYNAMICS_BACKENDS, f"backend must be one of {DYNAMICS_BACKENDS}"),
+            (self.observe in OBSERVE_MODES, f"observe must be one of {OBSERVE_MODES}"),
         ]
         for ok, message in checks:
             if not ok:
@@ -264,6 +274,12 @@ class QuadrotorCoverageEnv(CoverageEnv):
         """Waypoint nearest to each robot's measured position ``(R,)``: the one its
         observation is built on and its moves start from (a copy)."""
         return self._robot_node.copy()
+
+    @property
+    def observed_nodes(self) -> np.ndarray:
+        """Waypoint each robot is at in the observations and ``state()`` ``(R,)``: its snapped
+        waypoint, or its target while on its way with ``observe="targets"`` (a copy)."""
+        return self._view()[0].copy()
 
     @property
     def num_visited(self) -> int:
@@ -447,6 +463,15 @@ class QuadrotorCoverageEnv(CoverageEnv):
         hop = self.seconds_per_hop
         done = math.floor(self.time / hop + 1e-9)
         return done, math.ceil(self.dynamics.max_time / hop - 1e-9)
+
+    def _view(self) -> tuple[np.ndarray, np.ndarray]:
+        """Robots on their way at their targets, those targets visited (``observe="targets"``)."""
+        pending = ~self._ready  # (R,)
+        if self.dynamics.observe == "snapped" or not pending.any():
+            return super()._view()
+        features = self._waypoint_features.copy()
+        features[self._target[pending], 2] = 0.0
+        return np.where(pending, self._target, self._robot_node), features
 
     def _steps_left(self) -> int:
         """Nominal moves left in the mission (``state()["steps_left"]``)."""

@@ -526,10 +526,11 @@ class CoverageEnv(ParallelEnv):
     def observe_batch(self) -> dict[str, np.ndarray]:
         """Every robot's observation stacked on a leading robot axis (fresh arrays)."""
         self._require_episode()
+        robot_node, features = self._view()
         batch = build_ego_graphs(
             self._graph,
-            self._robot_node,
-            self._waypoint_features,
+            robot_node,
+            features,
             self.config.hops,
             self._ego_shape,
             self._ego_backend,
@@ -541,11 +542,14 @@ class CoverageEnv(ParallelEnv):
     def state(self) -> dict[str, np.ndarray]:
         """The whole graph in the observation encoding (see the module docstring)."""
         self._require_episode()
-        state = self._state_builder.build(
-            self._robot_node, self._waypoint_features, self._discovery
-        )
+        state = self._state_builder.build(*self._view(), self._discovery)
         state["steps_left"] = np.array(self._steps_left(), dtype=np.int64)
         return state
+
+    def _view(self) -> tuple[np.ndarray, np.ndarray]:
+        """What the observations and ``state()`` are built on: each robot's waypoint ``(R,)``
+        and the waypoint features ``(N, 4)``."""
+        return self._robot_node, self._waypoint_features
 
     def _steps_left(self) -> int:
         """Actions left in the episode (``state()["steps_left"]``)."""

@@ -187,6 +187,32 @@ def test_only_ready_robots_take_new_targets(path_graph) -> None:
     assert infos["robot_0"]["target"] == 1
 
 
+@pytest.mark.parametrize("observe", ["snapped", "targets"])
+def test_observations_place_robots_on_their_way_by_the_observe_rule(path_graph, observe) -> None:
+    env = line_env(path_graph, num_robots=2, observe=observe)
+    env.reset(seed=0, options={"robot_nodes": [0, 7], "interest_nodes": [1, 3]})
+    obs, *_ = env.step({"robot_0": 1, "robot_1": 0})  # robot_1 stays: ready after one period
+    assert env.ready.tolist() == [False, True] and env.snapped.tolist() == [0, 7]
+    on_its_way = {"snapped": 0, "targets": 1}[observe]  # robot_0 has just left waypoint 0
+    assert env.observed_nodes.tolist() == [on_its_way, 7]
+    state = env.state()
+    assert state["node_pos"][state["robot_nodes"]].tolist() == [[on_its_way, 0.0], [7.0, 0.0]]
+    # Waypoint 1, robot_0's target, counts as visited in the targets view only; the
+    # environment's own record (and the reward) is the same in both.
+    shown = {"snapped": 2.0, "targets": 1.0}[observe]
+    assert state["nodes"][:, 2].sum() == shown and obs["robot_1"]["nodes"][:, 2].sum() == shown
+    assert not env.snapshot().visited[1]
+    # Once robot_0 arrives it is ready, at its snapped waypoint, in both views.
+    while not env.ready[0]:
+        env.step({"robot_0": 0, "robot_1": 0})
+    assert env.observed_nodes.tolist() == [1, 7] and env.snapshot().visited[1]
+
+
+def test_bad_observe_rule_is_named() -> None:
+    with pytest.raises(ValueError, match="observe must be one of"):
+        DynamicsConfig(observe="future")
+
+
 def test_targets_go_through_the_collision_resolver(path_graph) -> None:
     env = line_env(path_graph, num_robots=2)
     env.reset(seed=0, options={"robot_nodes": [2, 4], "interest_nodes": [3]})
