@@ -28,7 +28,11 @@ the critic cannot tell the start of an episode from its end on the same graph.
 Fine-tuning: ``init`` loads a behaviour-cloned model as the actor (its GNN config replaces
 ``model.actor``); ``optim.critic_warmup_iters`` trains only the critic for the first iterations,
 so that an untrained critic does not push the cloned policy around; ``model.temperature < 1``
-samples from a sharper policy with the same argmax.
+samples from a sharper policy with the same argmax; ``loss.anchor_coef > 0`` adds to the actor's
+loss that weight times the KL divergence from the starting policy (``init``, frozen, sampled at
+the same temperature) to the trained one, averaged over the robots of a minibatch
+(:func:`anchor_kl`; AlphaStar's KL to its supervised policy), so that PPO moves the cloned
+policy only where its advantages point.
 
 Outputs in ``out``: ``config.yaml``, ``checkpoint.pt`` (resumable: re-run with the same ``out``),
 ``best.pt`` and ``model.pt`` (actor model files that ``scripts/evaluate.py checkpoint=...``
@@ -90,8 +94,8 @@ REWARDS = ("team", "own")
 
 @dataclass
 class LossConfig:
-    """``ClipPPOLoss`` and GAE settings (``reward``: ``"team"`` or ``"own"``, see the module
-    docstring)."""
+    """``ClipPPOLoss`` and GAE settings (``reward``: ``"team"`` or ``"own"``; ``anchor_coef``:
+    weight of the KL divergence from the ``init`` policy, 0: off; see the module docstring)."""
 
     gamma: float = 0.99
     lmbda: float = 0.95
@@ -101,6 +105,7 @@ class LossConfig:
     normalize_advantage: bool = True
     reward_scale: float = 0.1
     reward: str = "team"
+    anchor_coef: float = 0.0
 
 
 @dataclass
@@ -197,6 +202,10 @@ class MAPPOConfig:
             )
         if self.optim.minibatch_size < 1 or self.optim.epochs < 1:
             raise ValueError("optim.minibatch_size and optim.epochs must be >= 1")
+        if self.loss.anchor_coef < 0:
+            raise ValueError(f"loss.anchor_coef must be >= 0, got {self.loss.anchor_coef}")
+        if self.loss.anchor_coef > 0 and self.init is None:
+            raise ValueError("loss.anchor_coef > 0 needs init= (the policy to stay near)")
 
     @property
     def needs_ego(self) -> bool:
@@ -301,6 +310,21 @@ def build_loss(actor: Any, critic: Any, config: MAPPOConfig) -> Any:
     return loss
 
 
+def anchor_kl(actor: Any, anchor: Any, batch: Any) -> torch.Tensor:
+    """Mean over the batch and its robots of ``KL(anchor || actor)``, the divergence of the
+    actor's masked categorical from the frozen anchor's on the same observations (gradients
+    reach the actor only)."""
+    with torch.no_grad():
+        reference = anchor.get_dist(batch)
+    current = actor.get_dist(batch)
+    p = reference.probs  # (..., R, 5), 0 on masked actions
+    allowed = p > 0
+    log_ratio = reference.logits.masked_fill(~allowed, 0.0) - current.logits.masked_fill(
+        ~allowed, 0.0
+    )
+    return (p * log_ratio).sum(-1).mean()
+
+
 def prepare_batch(
     data: Any, reward_scale: float, reward: str = "team", end_is_terminal: bool = False
 ) -> Any:
@@ -358,6 +382,10 @@ def train_mappo(config: MAPPOConfig) -> dict[str, Any]:
     actor_gnn.to(device).train()
     critic_gnn.to(device).train()
     actor = build_actor(actor_gnn, config, num_robots)
+    anchor = None
+    if config.loss.anchor_coef > 0:  # the init file again: the same anchor when resuming
+        anchor_gnn = load_model(config.init)[0].to(device).eval().requires_grad_(False)
+        anchor = build_actor(anchor_gnn, config, num_robots)
     critic = build_critic(critic_gnn, config, num_robots, eval_env.config.max_steps)
     loss_module = build_loss(actor, critic, config)
     critic_lr = config.optim.critic_lr or config.optim.lr
@@ -379,6 +407,8 @@ def train_mappo(config: MAPPOConfig) -> dict[str, Any]:
     if iteration < c.n_iters:
         collector = _make_collector(config, actor, device, c.n_iters - iteration)
         collector.set_seed(config.seed + 100_003 * iteration)
+        if c.workers == 1:  # the collector reset its environment unseeded when it was built;
+            collector.reset()  # MultiSyncCollector.set_seed resets its workers itself
     buffer = ReplayBuffer(
         storage=LazyTensorStorage(c.frames_per_batch, device=device),
         sampler=SamplerWithoutReplacement(),
@@ -417,7 +447,7 @@ def train_mappo(config: MAPPOConfig) -> dict[str, Any]:
             for group, base in zip(optimizer.param_groups, base_lrs, strict=True):
                 group["lr"] = base * (1 - iteration / c.n_iters)
         actor_frozen = iteration < config.optim.critic_warmup_iters
-        metrics = _update(loss_module, optimizer, buffer, config, actor_frozen)
+        metrics = _update(loss_module, optimizer, buffer, config, actor_frozen, (actor, anchor))
         collector.update_policy_weights_()
         iteration += 1
         frames = iteration * c.frames_per_batch
@@ -504,24 +534,36 @@ def _resume(
 
 
 def _update(
-    loss_module: Any, optimizer: Any, buffer: Any, config: MAPPOConfig, actor_frozen: bool
+    loss_module: Any,
+    optimizer: Any,
+    buffer: Any,
+    config: MAPPOConfig,
+    actor_frozen: bool,
+    anchored: tuple[Any, Any | None] = (None, None),
 ) -> dict[str, float]:
-    """``epochs`` passes of PPO over the buffer; mean losses of the last pass."""
+    """``epochs`` passes of PPO over the buffer; mean losses of the last pass. ``anchored``:
+    the actor and its frozen anchor (``None``: no anchor term)."""
     steps = max(1, len(buffer) // config.optim.minibatch_size)
+    actor, anchor = anchored
     totals: dict[str, float] = {}
     for _ in range(config.optim.epochs):
         totals = {}
         for _ in range(steps):
-            losses = loss_module(buffer.sample())
+            batch = buffer.sample()
+            losses = loss_module(batch)
             if actor_frozen:
                 total = losses["loss_critic"]
             else:
                 total = losses["loss_objective"] + losses["loss_critic"] + losses["loss_entropy"]
+                if anchor is not None:
+                    losses["kl_anchor"] = anchor_kl(actor, anchor, batch)
+                    total = total + config.loss.anchor_coef * losses["kl_anchor"]
             optimizer.zero_grad()
             total.backward()
             torch.nn.utils.clip_grad_norm_(loss_module.parameters(), config.optim.max_grad_norm)
             optimizer.step()
-            for key in ("loss_objective", "loss_critic", "loss_entropy", "entropy", "kl_approx"):
+            keys = ("loss_objective", "loss_critic", "loss_entropy", "entropy", "kl_approx")
+            for key in (*keys, "kl_anchor"):
                 if key in losses:
                     totals[key] = totals.get(key, 0.0) + float(losses[key].detach()) / steps
     return totals
