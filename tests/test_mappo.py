@@ -371,3 +371,17 @@ def test_same_seed_trains_the_same_actor_bit_for_bit(tmp_path: Path) -> None:
     assert [r.get("episode_reward") for r in curves[0]] == [
         r.get("episode_reward") for r in curves[1]
     ]
+
+
+def test_a_run_from_before_a_new_key_resumes(tmp_path: Path) -> None:
+    import yaml
+
+    train_mappo(tiny_config(tmp_path, "collector.n_iters=1", "eval.every=1"))
+    saved = tmp_path / "run" / "config.yaml"
+    record = yaml.safe_load(saved.read_text())
+    del record["loss"]["anchor_coef"]  # as written before session 31
+    saved.write_text(yaml.safe_dump(record))
+    summary = train_mappo(tiny_config(tmp_path, "collector.n_iters=2", "eval.every=1"))
+    assert summary["iteration"] == 2
+    with pytest.raises(ValueError, match="loss.gamma"):
+        train_mappo(tiny_config(tmp_path, "collector.n_iters=3", "loss.gamma=0.5"))

@@ -364,8 +364,13 @@ def train_mappo(config: MAPPOConfig) -> dict[str, Any]:
     out = Path(config.out)
     out.mkdir(parents=True, exist_ok=True)
     record = configuration.as_dict(config)
-    check_same_run(
-        out / "config.yaml", record, ignored=("progress", "out", "collector", "snapshots")
+    defaults = configuration.as_dict(MAPPOConfig())
+    defaults.pop("env")  # a free-form dict: the environment's own defaults fill it
+    check_same_run(  # a key the saved config lacks (a run from before the key) reads as default
+        out / "config.yaml",
+        record,
+        ignored=("progress", "out", "collector", "snapshots"),
+        defaults=defaults,
     )
     write_text_atomic(out / "config.yaml", yaml.safe_dump(record, sort_keys=False))
     torch.manual_seed(config.seed)
