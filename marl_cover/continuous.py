@@ -279,7 +279,7 @@ class QuadrotorCoverageEnv(CoverageEnv):
     def observed_nodes(self) -> np.ndarray:
         """Waypoint each robot is at in the observations and ``state()`` ``(R,)``: its snapped
         waypoint, or its target while on its way with ``observe="targets"`` (a copy)."""
-        return self._view()[0].copy()
+        return np.where(self._shown_at_target(), self._target, self._robot_node)
 
     @property
     def num_visited(self) -> int:
@@ -464,10 +464,15 @@ class QuadrotorCoverageEnv(CoverageEnv):
         done = math.floor(self.time / hop + 1e-9)
         return done, math.ceil(self.dynamics.max_time / hop - 1e-9)
 
+    def _shown_at_target(self) -> np.ndarray:
+        """Robots the observations place at their targets ``(R,)``: those on their way, with
+        ``observe="targets"``."""
+        return ~self._ready & (self.dynamics.observe == "targets")
+
     def _view(self) -> tuple[np.ndarray, np.ndarray]:
         """Robots on their way at their targets, those targets visited (``observe="targets"``)."""
-        pending = ~self._ready  # (R,)
-        if self.dynamics.observe == "snapped" or not pending.any():
+        pending = self._shown_at_target()  # (R,)
+        if not pending.any():
             return super()._view()
         features = self._waypoint_features.copy()
         features[self._target[pending], 2] = 0.0

@@ -310,19 +310,26 @@ def build_loss(actor: Any, critic: Any, config: MAPPOConfig) -> Any:
     return loss
 
 
-def anchor_kl(actor: Any, anchor: Any, batch: Any) -> torch.Tensor:
+ANCHOR_KEY = (GROUP, "anchor_log_prob")
+
+
+@torch.no_grad()
+def anchor_log_probs(anchor: Any, batch: Any) -> torch.Tensor:
+    """The frozen anchor's log-probabilities of every action ``(..., R, 5)`` (``-inf`` where
+    masked), stored in a batch at :data:`ANCHOR_KEY` once, for every epoch that reads it."""
+    return anchor.get_dist(batch).logits
+
+
+def anchor_kl(actor: Any, batch: Any) -> torch.Tensor:
     """Mean over the batch and its robots of ``KL(anchor || actor)``, the divergence of the
-    actor's masked categorical from the frozen anchor's on the same observations (gradients
-    reach the actor only)."""
-    with torch.no_grad():
-        reference = anchor.get_dist(batch)
-    current = actor.get_dist(batch)
-    p = reference.probs  # (..., R, 5), 0 on masked actions
-    allowed = p > 0
-    log_ratio = reference.logits.masked_fill(~allowed, 0.0) - current.logits.masked_fill(
-        ~allowed, 0.0
-    )
-    return (p * log_ratio).sum(-1).mean()
+    actor's masked categorical from the anchor's (:func:`anchor_log_probs`, at
+    :data:`ANCHOR_KEY`) on the same observations."""
+    reference = batch.get(ANCHOR_KEY)  # (..., R, 5)
+    allowed = reference > -torch.inf
+    current = actor.get_dist(batch).logits
+    log_ratio = reference.masked_fill(~allowed, 0.0) - current.masked_fill(~allowed, 0.0)
+    # the probabilities as the distribution computes them (softmax), to the bit
+    return (reference.softmax(-1) * log_ratio).sum(-1).mean()
 
 
 def prepare_batch(
@@ -410,10 +417,8 @@ def train_mappo(config: MAPPOConfig) -> dict[str, Any]:
     c = config.collector
     collector = None
     if iteration < c.n_iters:
-        collector = _make_collector(config, actor, device, c.n_iters - iteration)
-        collector.set_seed(config.seed + 100_003 * iteration)
-        if c.workers == 1:  # the collector reset its environment unseeded when it was built;
-            collector.reset()  # MultiSyncCollector.set_seed resets its workers itself
+        seed = config.seed + 100_003 * iteration
+        collector = _make_collector(config, actor, device, c.n_iters - iteration, seed)
     buffer = ReplayBuffer(
         storage=LazyTensorStorage(c.frames_per_batch, device=device),
         sampler=SamplerWithoutReplacement(),
@@ -447,12 +452,16 @@ def train_mappo(config: MAPPOConfig) -> dict[str, Any]:
                 target_params=loss_module.target_critic_network_params,
             )
         buffer.empty()
-        buffer.extend(data.reshape(-1))
+        flat = data.reshape(-1)
+        if anchor is not None:
+            flat.set(ANCHOR_KEY, anchor_log_probs(anchor, flat))
+        buffer.extend(flat)
         if config.optim.lr_anneal:
             for group, base in zip(optimizer.param_groups, base_lrs, strict=True):
                 group["lr"] = base * (1 - iteration / c.n_iters)
         actor_frozen = iteration < config.optim.critic_warmup_iters
-        metrics = _update(loss_module, optimizer, buffer, config, actor_frozen, (actor, anchor))
+        anchored = actor if anchor is not None else None
+        metrics = _update(loss_module, optimizer, buffer, config, actor_frozen, anchored)
         collector.update_policy_weights_()
         iteration += 1
         frames = iteration * c.frames_per_batch
@@ -544,12 +553,11 @@ def _update(
     buffer: Any,
     config: MAPPOConfig,
     actor_frozen: bool,
-    anchored: tuple[Any, Any | None] = (None, None),
+    anchored: Any | None = None,
 ) -> dict[str, float]:
     """``epochs`` passes of PPO over the buffer; mean losses of the last pass. ``anchored``:
-    the actor and its frozen anchor (``None``: no anchor term)."""
+    the actor, when the buffer holds the anchor's log-probabilities (``None``: no anchor)."""
     steps = max(1, len(buffer) // config.optim.minibatch_size)
-    actor, anchor = anchored
     totals: dict[str, float] = {}
     for _ in range(config.optim.epochs):
         totals = {}
@@ -560,8 +568,8 @@ def _update(
                 total = losses["loss_critic"]
             else:
                 total = losses["loss_objective"] + losses["loss_critic"] + losses["loss_entropy"]
-                if anchor is not None:
-                    losses["kl_anchor"] = anchor_kl(actor, anchor, batch)
+                if anchored is not None:
+                    losses["kl_anchor"] = anchor_kl(anchored, batch)
                     total = total + config.loss.anchor_coef * losses["kl_anchor"]
             optimizer.zero_grad()
             total.backward()
@@ -574,7 +582,10 @@ def _update(
     return totals
 
 
-def _make_collector(config: MAPPOConfig, actor: Any, device: torch.device, n_iters: int) -> Any:
+def _make_collector(
+    config: MAPPOConfig, actor: Any, device: torch.device, n_iters: int, seed: int
+) -> Any:
+    """A collector whose episodes, the first included, are seeded from ``seed``."""
     from torchrl.collectors import Collector, MultiSyncCollector
 
     c = config.collector
@@ -587,10 +598,14 @@ def _make_collector(config: MAPPOConfig, actor: Any, device: torch.device, n_ite
         "storing_device": device,
         "auto_register_policy_transforms": False,
     }
-    if c.workers == 1:
-        return Collector(make_env(config), actor, return_same_td=True, **kwargs)
+    if c.workers == 1:  # seeded before the collector's first reset, which it makes when built
+        env = make_env(config)
+        env.set_seed(seed)
+        return Collector(env, actor, return_same_td=True, **kwargs)
     factories = [_EnvFactory(config)] * c.workers
-    return MultiSyncCollector(factories, actor, **kwargs)
+    collector = MultiSyncCollector(factories, actor, **kwargs)
+    collector.set_seed(seed)  # seeds the workers' environments, then resets them
+    return collector
 
 
 class _EnvFactory:
