@@ -40,7 +40,9 @@ class Episode:
         graph: The map.
         interest: ``(N,)`` bool, points of interest.
         robot_node: ``(T + 1, R)`` waypoints before each step and after the last.
-        actions: ``(T, R)`` int8 actions taken.
+        actions: ``(T, R)`` int8 actions taken (labels, in DAgger episodes); ``-1`` where a
+            robot has no label (it did not decide at that state: asynchronous missions,
+            :mod:`agents.mission_dagger`).
         fallbacks: Steps on which a robot used the expert's greedy fallback.
         accept: ``(T, R)`` int8 bit masks of the actions the labelling expert rated as good
             as ``actions`` (bit ``a`` for action ``a``: every first hop of a shortest path to
@@ -61,7 +63,8 @@ class Episode:
         where recorded, else the label's bit alone."""
         if self.accept is not None:
             return self.accept.astype(np.int64)
-        return 1 << self.actions.astype(np.int64)
+        actions = self.actions.astype(np.int64)
+        return np.where(actions >= 0, 1 << actions.clip(min=0), 0)
 
     @property
     def num_steps(self) -> int:
@@ -192,6 +195,8 @@ def trajectory_ties(episode: Episode) -> np.ndarray:
     its stops; a DAgger episode records the labelling expert's sets instead
     (:attr:`Episode.accept`), since its trajectory is the learner's.
     """
+    if (episode.actions < 0).any():
+        raise ValueError(f"episode {episode.seed} has unlabelled robots; it must record accept")
     steps, num_robots = episode.actions.shape
     nodes = episode.robot_node  # (T + 1, R)
     first_visit = np.full(episode.graph.num_nodes, steps + 1, dtype=np.int64)

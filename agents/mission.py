@@ -118,7 +118,11 @@ class MissionResult:
         return out
 
 
-def _ask(policy: Any, env: QuadrotorCoverageEnv, observations: dict[str, Any]) -> dict[str, int]:
+def ask_policy(
+    policy: Any, env: QuadrotorCoverageEnv, observations: dict[str, Any]
+) -> dict[str, int]:
+    """Every robot's action from ``policy`` (see the module docstring); the actions of robots
+    that are not ready are ignored by the environment."""
     if hasattr(policy, "act_env"):
         return policy.act_env(env)
     if hasattr(policy, "act_state"):
@@ -164,7 +168,7 @@ def run_mission(
         )
         if not cacheable or snap_key != key:
             tick = time.perf_counter()
-            actions = _ask(policy, env, observations)
+            actions = ask_policy(policy, env, observations)
             policy_seconds += time.perf_counter() - tick
             decisions += 1
             key = snap_key
@@ -302,15 +306,17 @@ MISSION_METHODS = ("greedy", "greedy_stay", "gnn", "expert")
 
 
 def mission_model_path() -> Path:
-    """The GNN the mission flies by default (``shipped/mission/coverage_gnn.pt``, since session
-    25): the MAPPO fine-tune that flew it before (``shipped/mappo/coverage_gnn.pt``) grown to a
-    29-hop receptive field (``AggregationGNN.deeper_copy``) and trained by DAgger on a discrete
-    stand-in for the mission (the mission's map and team, 131 moves), labelled by the routing
-    expert planning 29 moves ahead; it is chosen on seeds 100..129 and flies the test seeds
-    0..9 at more than 50 x real time on one core (see docs/results/mission.md)."""
+    """The GNN the mission flies by default (``shipped/mission_mappo/coverage_gnn.pt``, since
+    session 32): the 29-hop model ``shipped/mission/coverage_gnn.pt`` (the mission's model in
+    sessions 25-31: the MAPPO coverage fine-tune grown to 29 hops with
+    ``AggregationGNN.deeper_copy`` and trained by DAgger on a discrete stand-in for the mission,
+    the mission's map and team for 131 moves, labelled by the routing expert planning 29 moves
+    ahead) fine-tuned by MAPPO on that stand-in. It was chosen on 100 mission seeds (200..299),
+    where it leads that model by 1.6%, and flies the mission at more than 50 x real time on one
+    core (see docs/results/mission.md)."""
     from agents.models.shipped import SHIPPED
 
-    return SHIPPED / "mission" / "coverage_gnn.pt"
+    return SHIPPED / "mission_mappo" / "coverage_gnn.pt"
 
 
 def make_mission_policy(method: str, config: MissionConfig) -> Any:

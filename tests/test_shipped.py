@@ -160,19 +160,11 @@ def test_the_coverage_model_averages_a_second_run_of_the_per_hop_recipe() -> Non
     assert metadata["selection"]["chosen"] == "steps 12000..16000 (5)"
 
 
-def test_the_mission_flies_the_29_hop_model_grown_from_the_mappo_fine_tune() -> None:
-    """``mission/coverage_gnn.pt`` (since session 25): ``mappo/coverage_gnn.pt`` (the BC model
-    fine-tuned by MAPPO, the mission's model before) grown to 29 hops and trained by DAgger on
-    the mission's discrete stand-in; the mission's model by default and in ``mission.yaml``."""
-    from agents.configuration import load
-    from agents.mission import MissionConfig, mission_model_path
-
+def test_the_29_hop_model_is_grown_from_the_mappo_fine_tune() -> None:
+    """``mission/coverage_gnn.pt`` (the mission's model in sessions 25-31):
+    ``mappo/coverage_gnn.pt`` (the BC model fine-tuned by MAPPO, the mission's model before)
+    grown to 29 hops and trained by DAgger on the mission's discrete stand-in."""
     model, metadata, card = shipped_beside("mission")
-    assert mission_model_path() == SHIPPED / "mission" / "coverage_gnn.pt"
-    config = load(MissionConfig, SHIPPED.parents[2] / "configs" / "mission.yaml", [])
-    assert SHIPPED.parents[2] / config.checkpoint == mission_model_path()
-    assert MissionConfig().setup("gnn")["model_sha256"] == file_sha256(mission_model_path())
-    assert config.observation_hops() == 29  # the mission's ego-graphs span its field
     mappo, _, mappo_card = shipped_beside("mappo")
     assert model.config == replace(mappo.config, hops=29)
     assert card["config"]["init"] == "agents/models/shipped/mappo/coverage_gnn.pt"
@@ -188,3 +180,33 @@ def test_the_mission_flies_the_29_hop_model_grown_from_the_mappo_fine_tune() -> 
     assert mappo_card["init"]["path"] == "agents/models/shipped/bc/coverage_gnn.pt"
     assert city_rewards(mappo) == [80.0, 86.0, 88.0, 96.0, 81.0]
     assert city_rewards(model) == [89.0, 87.0, 88.0, 82.0, 86.0]
+
+
+def test_the_mission_flies_the_29_hop_model_fine_tuned_by_mappo_on_the_stand_in() -> None:
+    """``mission_mappo/coverage_gnn.pt`` (since session 32): ``mission/coverage_gnn.pt`` fine-tuned
+    by MAPPO on the mission's discrete stand-in; the mission's model by default and in
+    ``mission.yaml``."""
+    from agents.configuration import load
+    from agents.mission import MissionConfig, mission_model_path
+
+    model, metadata, card = shipped_beside("mission_mappo")
+    assert mission_model_path() == SHIPPED / "mission_mappo" / "coverage_gnn.pt"
+    config = load(MissionConfig, SHIPPED.parents[2] / "configs" / "mission.yaml", [])
+    assert SHIPPED.parents[2] / config.checkpoint == mission_model_path()
+    assert MissionConfig().setup("gnn")["model_sha256"] == file_sha256(mission_model_path())
+    assert config.observation_hops() == 29  # the mission's ego-graphs span its field
+    start, start_metadata, _ = shipped_beside("mission")
+    assert model.config == start.config
+    assert metadata["algorithm"] == "mappo"
+    assert metadata["init"]["path"] == "agents/models/shipped/mission/coverage_gnn.pt"
+    assert metadata["init"]["step"] == start_metadata["step"]
+    assert card["init_sha256"] == file_sha256(SHIPPED / "mission" / "coverage_gnn.pt")
+    env = card["config"]["env"]
+    assert (env["map"], env["num_robots"], env["hops"], env["max_steps"]) == (
+        "paper_full",
+        10,
+        29,
+        131,
+    )
+    assert card["config"]["init"] == "agents/models/shipped/mission/coverage_gnn.pt"
+    assert city_rewards(model) == [86.0, 83.0, 87.0, 88.0, 75.0]

@@ -277,7 +277,14 @@ def batch_loss(
         targets.append(part.batch["action"].reshape(-1))
         accepts.append(part.batch["accept"].reshape(-1))
     logits, target = torch.cat(logits), torch.cat(targets)  # (B*R, 5), (B*R,)
-    accepted = (torch.cat(accepts).unsqueeze(-1) >> torch.arange(NUM_ACTIONS)) & 1  # (B*R, 5)
+    # robots without a label (-1: they did not decide at that state) do not count
+    labelled = target >= 0
+    if not bool(labelled.all()):
+        logits, target = logits[labelled], target[labelled]
+        accepts = [torch.cat(accepts)[labelled]]
+    if not bool(labelled.any()):
+        raise ValueError("a batch without any labelled robot (every action is -1)")
+    accepted = (torch.cat(accepts).unsqueeze(-1) >> torch.arange(NUM_ACTIONS)) & 1  # (L, 5)
     cross_entropy = functional.cross_entropy(logits, target)
     log_probs = torch.log_softmax(logits, dim=-1)
     # -log of the probability of the accepted set (the label alone where there are no ties)
@@ -292,6 +299,7 @@ def batch_loss(
         "entropy": float(entropy.detach()),
         "accuracy": float((choice.squeeze(-1) == target).float().mean()),
         "set_accuracy": float(accepted.gather(-1, choice).float().mean()),
+        "labelled": int(labelled.sum()),
     }
 
 
