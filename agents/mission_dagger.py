@@ -97,8 +97,7 @@ def record_mission(
     total = expert_moves = agreed = 0
     while env.agents:
         ready = env.ready  # (R,)
-        snapped = env.snapped  # (R,)
-        if not np.array_equal(snapped[ready], env.targets[ready]):
+        if not np.array_equal(rows[-1][ready], env.targets[ready]):  # rows[-1]: snapped now
             raise RuntimeError("a ready robot is not at its target waypoint")
         wanted = expert.act_env(env)
         label = np.array([wanted[a] for a in agents], dtype=np.int64)  # (R,)
@@ -122,8 +121,7 @@ def record_mission(
         actions=np.array(labels, dtype=np.int8),
         accept=np.array(accepts, dtype=np.int8),
     )
-    recorded = episode.visited(episode.num_steps) & episode.interest
-    if int(recorded.sum() - episode.interest[episode.robot_node[0]].sum()) != total:
+    if episode.reward() != total:  # the points of the waypoints the record visits
         raise RuntimeError("the record's visited waypoints differ from the mission's")
     labelled = int((episode.actions >= 0).sum())
     return MissionRecord(episode, total, labelled, expert_moves, agreed)
@@ -213,7 +211,6 @@ def collect_mission_dagger(config: MissionDaggerConfig) -> dict[str, Any]:
     out.mkdir(parents=True, exist_ok=True)
     mission = config.mission()
     record = {**as_dict(config), "model_sha256": file_sha256(mission.gnn_model_path())}
-    record = json.loads(json.dumps(record))  # plain lists, as the saved YAML reads back
     config_path = out / "config.yaml"
     check_same_run(config_path, record, ignored=("missions", "progress", "out"))
     write_text_atomic(config_path, yaml.safe_dump(record, sort_keys=False))

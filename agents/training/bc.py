@@ -276,15 +276,14 @@ def batch_loss(
         logits.append(action_logits(model, (nodes, edge_index, edge_attr), action_edges))
         targets.append(part.batch["action"].reshape(-1))
         accepts.append(part.batch["accept"].reshape(-1))
-    logits, target = torch.cat(logits), torch.cat(targets)  # (B*R, 5), (B*R,)
+    logits, target, accept = torch.cat(logits), torch.cat(targets), torch.cat(accepts)
     # robots without a label (-1: they did not decide at that state) do not count
-    labelled = target >= 0
-    if not bool(labelled.all()):
-        logits, target = logits[labelled], target[labelled]
-        accepts = [torch.cat(accepts)[labelled]]
+    labelled = target >= 0  # (B*R,)
     if not bool(labelled.any()):
         raise ValueError("a batch without any labelled robot (every action is -1)")
-    accepted = (torch.cat(accepts).unsqueeze(-1) >> torch.arange(NUM_ACTIONS)) & 1  # (L, 5)
+    if not bool(labelled.all()):
+        logits, target, accept = logits[labelled], target[labelled], accept[labelled]
+    accepted = (accept.unsqueeze(-1) >> torch.arange(NUM_ACTIONS)) & 1  # (L, 5)
     cross_entropy = functional.cross_entropy(logits, target)
     log_probs = torch.log_softmax(logits, dim=-1)
     # -log of the probability of the accepted set (the label alone where there are no ties)

@@ -37,7 +37,7 @@ def check_same_run(
         return
     saved = yaml.safe_load(path.read_text()) or {}
     previous = _flatten(merge(defaults or {}, saved))
-    current = _flatten(record)
+    current = _flatten(yaml.safe_load(yaml.safe_dump(record)))  # as it reads back: tuples as lists
     skip = set(ignored)
     changed = sorted(
         key
