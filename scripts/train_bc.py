@@ -21,7 +21,8 @@
 Re-running with the same ``out`` resumes from ``out/checkpoint.pt`` (with more
 ``dagger.rounds``, a finished run goes on with the next round). Any key of
 ``agents.training.bc.BCConfig`` (``section.key`` for ``model.*`` and ``dagger.*``) can be
-overridden; an unknown key is an error.
+overridden; an unknown key is an error. ``--print-config`` prints the settings a run
+would use (the preset with the overrides) as YAML for ``--config``, and trains nothing.
 """
 
 from __future__ import annotations

@@ -10,7 +10,9 @@
 Any key of ``agents.training.mappo.MAPPOConfig`` can be overridden (``section.key=value`` for
 ``collector``, ``loss``, ``optim``, ``model``, ``eval``; ``env.key=value`` for the environment's
 ``CoverageConfig`` fields); an unknown key is an error. Re-running with the same ``out`` resumes
-from ``out/checkpoint.pt``; ``collector.n_iters`` may grow between runs.
+from ``out/checkpoint.pt``; ``collector.n_iters`` may grow between runs. ``--print-config``
+prints the settings a run would use (the preset with the overrides) as YAML for ``--config``,
+and trains nothing.
 """
 
 from __future__ import annotations

@@ -284,6 +284,23 @@ def test_train_mappo_script_smoke_and_resume(tmp_path: Path) -> None:
     assert bad.returncode != 0 and "gama" in bad.stderr
 
 
+def test_print_config_shows_the_settings_and_trains_nothing(tmp_path: Path) -> None:
+    """``--print-config`` prints the preset with the overrides applied, as YAML that
+    ``--config`` reads back to the same settings, and writes no run folder."""
+    preset = str(ROOT / "configs" / "mappo_finetune.yaml")
+    overrides = ["loss.gamma=1.0", "model.critic_time=true", f"out={tmp_path / 'run'}"]
+    done = run_script("train_mappo.py", "--print-config", "--config", preset, *overrides)
+    assert done.returncode == 0, done.stderr[-3000:]
+    printed = tmp_path / "printed.yaml"
+    printed.write_text(done.stdout)
+    expected = configuration.load(MAPPOConfig, preset, overrides)
+    assert configuration.load(MAPPOConfig, printed) == expected
+    assert expected.loss.gamma == 1.0 and expected.model.critic_time
+    assert not (tmp_path / "run").exists()
+    bad = run_script("train_mappo.py", "--print-config", "loss.gama=0.9")
+    assert bad.returncode != 0 and "gama" in bad.stderr
+
+
 def test_worker_processes_collect_the_same_budget(tmp_path: Path) -> None:
     config = tiny_config(tmp_path, "collector.workers=2", "collector.n_iters=2", "eval.every=2")
     summary = train_mappo(config)

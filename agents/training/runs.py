@@ -94,27 +94,41 @@ def command_line(
     """A training script's ``main``: ``[--config YAML] key=value ...`` -> the typed config ->
     ``train(config)`` -> its summary as JSON on stdout.
 
-    Bad settings (an unknown key, a missing file, a bad value) exit with a one-line message
-    that names the script and the problem.
+    ``--help`` shows the script's docstring (its examples); ``--print-config`` prints the
+    settings a run would use, as YAML that ``--config`` reads back, and trains nothing. Bad
+    settings (an unknown key, a missing file, a bad value) exit with a one-line message that
+    names the script and the problem.
     """
     import argparse
     import json
     import logging
     import sys
 
+    import yaml
+
     from agents import configuration
 
-    parser = argparse.ArgumentParser(description=doc.split("\n")[0])
+    parser = argparse.ArgumentParser(
+        description=doc, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--config", default=str(default_config), help="YAML preset")
+    parser.add_argument(
+        "--print-config",
+        action="store_true",
+        help="print the resolved settings as YAML and exit without training",
+    )
     parser.add_argument("overrides", nargs="*", help="key=value overrides")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.WARNING)
-    import torchrl  # noqa: F401 (configures its logger on import; quieten it after)
-
-    logging.getLogger("torchrl").setLevel(logging.WARNING)  # it logs buffer set-up to stdout
     script = Path(sys.argv[0]).stem
     try:
         config = configuration.load(config_class, args.config, args.overrides)
+        if args.print_config:
+            print(yaml.safe_dump(configuration.as_dict(config), sort_keys=False), end="")
+            return
+        import torchrl  # noqa: F401 (configures its logger on import; quieten it after)
+
+        logging.getLogger("torchrl").setLevel(logging.WARNING)  # it logs buffer set-up to stdout
         summary = train(config)
     except (ValueError, FileNotFoundError) as error:
         raise SystemExit(f"{script}: {error}") from error
