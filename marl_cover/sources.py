@@ -109,7 +109,11 @@ def _cached_paper_graph(perimeter: float) -> SpatialGraph:
 
 @lru_cache(maxsize=8)
 def _cached_grid_graph(path: str, cell_size: float, perimeter: float | None) -> SpatialGraph:
-    return graph_from_occupancy(load_occupancy(path), cell_size, perimeter=perimeter)
+    occupied = load_occupancy(path)  # names the file itself when it cannot be read
+    try:
+        return graph_from_occupancy(occupied, cell_size, perimeter=perimeter)
+    except ValueError as error:  # no usable free cell: say which file
+        raise ValueError(f"{path}: {error}") from error
 
 
 def make_map_source(config: CoverageConfig) -> MapSource:

@@ -26,9 +26,10 @@ Policies: ``greedy`` (each robot on its ego-graph), ``greedy_central`` (same act
 ``agents.experts.LocalRoutingExpert``; ``fallback`` with nothing in view),
 ``gnn`` (the shipped model of the task, or ``checkpoint=PATH``; each robot on its own ego-graph,
 or ``gnn.centralized=true`` for one pass over ``state()``; argmax actions unless
-``gnn.deterministic=false``; comma-separated files play as one ensemble,
-``agents.models.policy.EnsemblePolicy``). A GNN runs with the receptive field it was trained
-with: ``hops`` defaults to the model's (the largest of an ensemble's).
+``gnn.deterministic=false``, which samples at ``gnn.temperature`` (default 1); comma-separated
+files play as one ensemble, ``agents.models.policy.EnsemblePolicy``). A GNN runs with the
+receptive field it was trained with: ``hops`` defaults to the model's (the largest of an
+ensemble's).
 Maps: ``city`` (default), ``paper`` (windows of the paper's map), ``paper_full``,
 ``paper_large``, or a grid file. Any other ``key=value`` is a field of ``CoverageConfig``
 (``num_robots=10``, ``max_steps=49``, ...); an unknown key is an error.
@@ -70,6 +71,7 @@ class ExpertOptions:
 class GNNOptions:
     centralized: bool = False
     deterministic: bool = True
+    temperature: float = 1.0  # with deterministic=false: sample at this temperature
 
 
 @dataclass
@@ -138,6 +140,11 @@ def parse_overrides(
         raise SystemExit("expert.clock=false applies to policy=expert_rh and expert_local only")
     if expert.fallback_reach is not None and options.policy not in ("expert", "expert_rh"):
         raise SystemExit("expert.fallback_reach applies to policy=expert and expert_rh only")
+    if gnn.temperature != 1.0 and (gnn.deterministic or not gnn.temperature > 0):
+        raise SystemExit(
+            f"gnn.temperature={gnn.temperature}: a sampling temperature (> 0) that needs "
+            "gnn.deterministic=false"
+        )
     if expert.information != "full" and options.policy == "expert_local":
         raise SystemExit(
             "expert.information does not apply to policy=expert_local (it plans on what each "
@@ -181,7 +188,12 @@ def make_policy(
         from agents.models.policy import EnsemblePolicy, GNNPolicy
 
         cls = EnsemblePolicy if isinstance(model, list) else GNNPolicy
-        return cls(model, centralized=gnn.centralized, deterministic=gnn.deterministic)
+        return cls(
+            model,
+            centralized=gnn.centralized,
+            deterministic=gnn.deterministic,
+            temperature=gnn.temperature,
+        )
     if options.policy in ("greedy", "greedy_central"):
         from agents.greedy import CentralizedGreedyPolicy, GreedyPolicy
 

@@ -6,6 +6,7 @@ import json
 import subprocess
 from pathlib import Path
 
+import numpy as np
 import pytest
 from helpers import run_script
 
@@ -106,6 +107,7 @@ def test_cli_rejects_unknown_keys() -> None:
         ("expert.time_limit=soon", "ExpertOptions.time_limit must be a number"),
         ("num_robots=x", "CoverageConfig.num_robots must be an integer, got 'x'"),
         ("window_fraction=3", "window_fraction must be in (0, 1], got 3"),
+        ("gnn.temperature=0.5", "needs gnn.deterministic=false"),
     ],
 )
 def test_cli_names_bad_values(argument: str, message: str) -> None:
@@ -169,6 +171,32 @@ def test_cli_evaluates_a_gnn_checkpoint_both_ways(tmp_path) -> None:
         assert got == [r.reward for r in expected.results]
     result = run_cli("policy=gnn", f"checkpoint={tmp_path / 'missing.pt'}", "episodes=1")
     assert result.returncode != 0 and "missing.pt" in result.stderr
+
+
+def test_sampling_temperature_sharpens_toward_the_argmax() -> None:
+    torch = pytest.importorskip("torch")
+    from agents.models import AggregationGNN, GNNConfig
+    from agents.models.policy import GNNPolicy
+
+    torch.manual_seed(0)
+    model = AggregationGNN(GNNConfig(kind="nonlinear", hops=3)).double()
+    env = marl_cover.parallel_env(num_robots=4, hops=3, max_steps=10)
+    observations, _ = env.reset(seed=0)
+    argmax = GNNPolicy(model)
+    logits = argmax.logits(observations)  # (4, 5), -inf where masked
+    cold = GNNPolicy(model, deterministic=False, temperature=1e-9)
+    assert cold.act(observations) == argmax.act(observations)
+    # Very hot: every allowed move about equally often, never a masked one.
+    hot = GNNPolicy(model, deterministic=False, temperature=1e9, seed=1)
+    counts = np.zeros((4, 5))
+    for _ in range(2000):
+        counts[np.arange(4), list(hot.act(observations).values())] += 1
+    allowed = torch.isfinite(logits).numpy()
+    assert (counts[~allowed] == 0).all()
+    expected = 2000 / allowed.sum(axis=1, keepdims=True)
+    assert np.abs(counts - expected)[allowed].max() < 0.2 * expected.min()
+    with pytest.raises(ValueError, match="temperature must be > 0, got 0"):
+        GNNPolicy(model, deterministic=False, temperature=0)
 
 
 def test_cli_evaluates_an_ensemble_of_checkpoints(tmp_path) -> None:

@@ -148,6 +148,14 @@ def test_load_occupancy_formats_and_errors(tmp_path) -> None:
         load_occupancy(tmp_path / "missing.npy")
 
 
+def test_a_grid_file_without_free_cells_is_named(tmp_path) -> None:
+    import marl_cover
+
+    np.save(tmp_path / "walls.npy", np.ones((6, 6), dtype=bool))
+    with pytest.raises(ValueError, match=r"walls\.npy: the occupancy grid has no free cell"):
+        marl_cover.parallel_env(map=str(tmp_path / "walls.npy"))
+
+
 @pytest.mark.parametrize("size", [100, 228, 5000, 100_000])
 def test_city_has_exact_size_and_is_connected(size: int) -> None:
     graph = generate_city(np.random.default_rng(size), CityConfig(num_waypoints=size))

@@ -221,6 +221,11 @@ class GNNPolicy:
             per robot (same actions; faster for large teams).
         deterministic: Argmax (default) or sample from the masked categorical.
         seed: Seed of the sampling generator (reset with each episode's seed).
+        temperature: Divides the logits before sampling (below 1: sharper, toward the argmax
+            with near-ties broken at random; see :class:`Tempered`). Unused by the argmax.
+
+    Raises:
+        ValueError: ``temperature`` is not positive.
     """
 
     def __init__(
@@ -229,11 +234,15 @@ class GNNPolicy:
         centralized: bool = False,
         deterministic: bool = True,
         seed: int = 0,
+        temperature: float = 1.0,
     ) -> None:
+        if not temperature > 0:
+            raise ValueError(f"temperature must be > 0, got {temperature}")
         self.model = model.eval()
         self._dtype = next(model.parameters()).dtype
         self.centralized = centralized
         self.deterministic = deterministic
+        self.temperature = temperature
         self._generator = torch.Generator().manual_seed(seed)
         if centralized:
             self.act_state = self._act_state
@@ -245,7 +254,7 @@ class GNNPolicy:
     def _choose(self, logits: torch.Tensor) -> np.ndarray:
         if self.deterministic:
             return logits.argmax(dim=-1).numpy()
-        probs = torch.softmax(logits, dim=-1)
+        probs = torch.softmax(logits / self.temperature, dim=-1)
         return torch.multinomial(probs, 1, generator=self._generator).squeeze(-1).numpy()
 
     @torch.inference_mode()
@@ -290,7 +299,7 @@ class EnsemblePolicy(GNNPolicy):
 
     Args:
         models: The members (any configs; they see the same observations).
-        centralized, deterministic, seed: As for :class:`GNNPolicy`.
+        centralized, deterministic, seed, temperature: As for :class:`GNNPolicy`.
 
     Raises:
         ValueError: no member.
@@ -302,10 +311,11 @@ class EnsemblePolicy(GNNPolicy):
         centralized: bool = False,
         deterministic: bool = True,
         seed: int = 0,
+        temperature: float = 1.0,
     ) -> None:
         if not models:
             raise ValueError("an ensemble needs at least one model")
-        super().__init__(models[0], centralized, deterministic, seed)
+        super().__init__(models[0], centralized, deterministic, seed, temperature)
         self.members = [GNNPolicy(model) for model in models]
 
     def logits(self, observations: dict[str, dict[str, np.ndarray]]) -> torch.Tensor:
