@@ -1,0 +1,183 @@
+"""One-step rollout improvement of a base policy, by exact simulation.
+
+Coverage and exploration are deterministic once an episode has started: the same actions from
+the same state give the same future. So the return of a joint action followed by a base policy
+is computed exactly by playing the episode out on copies of the environment
+(:func:`fork`), and the one-step rollout policy (Bertsekas' rollout) takes, for each robot,
+the move whose play-out returns most:
+
+- ``sequential=True`` (multiagent rollout, one robot at a time): robot ``i`` tries its moves
+  with robots ``0..i-1`` on the moves already chosen and the others on the base policy's. A
+  move replaces the base policy's only when it returns strictly more, so each step's joint
+  action returns at least the base policy's from that state, and the rollout policy's episode
+  returns at least the base policy's (tested).
+- ``sequential=False`` (every robot against the base policy's joint action): each robot's best
+  single deviation, all evaluated in one batch. These are the labels a decentralized learner
+  can hope to imitate, each robot's best response to a team that plays the base policy; their
+  combination has no guarantee.
+
+The rollout policy reads the whole state and plays the future out: it is an omniscient planner,
+as the routing experts are, and a teacher for DAgger (``scripts/collect_rollout_labels.py``
+labels a learner's own states with it). All play-outs of a decision run in lockstep, so a
+network base decides for all of them in one batched pass (:class:`GNNArgmax`).
+"""
+
+from __future__ import annotations
+
+import copy
+from collections import Counter
+from typing import Any, Protocol
+
+import numpy as np
+
+from marl_cover.env import CoverageEnv
+
+
+class BasePolicy(Protocol):
+    """A centralized policy over a batch of states: ``(B, R)`` integer actions for ``B``
+    ``state()`` dictionaries (every state of one environment configuration)."""
+
+    def __call__(self, states: list[dict[str, np.ndarray]]) -> np.ndarray: ...
+
+
+class GNNArgmax:
+    """A GNN's argmax actions for a batch of states, in one pass (a :class:`BasePolicy`).
+
+    Args:
+        model: An :class:`~agents.models.gnn.AggregationGNN`.
+    """
+
+    def __init__(self, model: Any) -> None:
+        self.model = model.eval()
+        self._dtype = next(model.parameters()).dtype
+
+    def __call__(self, states: list[dict[str, np.ndarray]]) -> np.ndarray:
+        import torch
+
+        from agents.models.gnn import batched_state_logits
+
+        keys = [key for key in states[0] if key != "robot_nodes"]
+        batch = {}
+        for key in keys:
+            tensor = torch.from_numpy(np.stack([np.asarray(s[key]) for s in states]))
+            batch[key] = tensor.to(self._dtype) if tensor.is_floating_point() else tensor
+        num_robots = len(states[0]["robot_nodes"])
+        with torch.inference_mode():
+            logits = batched_state_logits(self.model, batch, num_robots)  # (B, R, 5)
+        return logits.argmax(dim=-1).numpy()
+
+
+class StatePolicyBase:
+    """Any policy with ``act_state(state)`` as a :class:`BasePolicy` (one call per state)."""
+
+    def __init__(self, policy: Any) -> None:
+        self.policy = policy
+
+    def __call__(self, states: list[dict[str, np.ndarray]]) -> np.ndarray:
+        return np.stack([np.asarray(self.policy.act_state(s)) for s in states])
+
+
+def fork(env: CoverageEnv) -> CoverageEnv:
+    """An independent copy of ``env`` mid-episode (its map is shared: it never changes)."""
+    graph = env.snapshot().graph
+    return copy.deepcopy(env, {id(graph): graph})
+
+
+def play_out(env: CoverageEnv, base: BasePolicy, joints: np.ndarray) -> np.ndarray:
+    """The exact return of each joint action followed by ``base`` to the end of the episode.
+
+    Args:
+        env: The environment mid-episode (left unchanged).
+        base: The policy every robot follows after the first step.
+        joints: ``(J, R)`` first-step actions (unmasked moves; a masked one is a stay).
+
+    Returns:
+        ``(J,)`` float: the team reward from this step to the end, for each joint action.
+    """
+    forks = [fork(env) for _ in joints]
+    totals = np.array(
+        [
+            float(f.apply_actions(np.asarray(j)).new_interest.sum())
+            for f, j in zip(forks, joints, strict=True)
+        ]
+    )
+    live = [k for k, f in enumerate(forks) if f.agents]
+    while live:
+        actions = base([forks[k].state() for k in live])  # (len(live), R)
+        for k, action in zip(live, actions, strict=True):
+            totals[k] += float(forks[k].apply_actions(action).new_interest.sum())
+        live = [k for k in live if forks[k].agents]
+    return totals
+
+
+class RolloutPolicy:
+    """The one-step rollout policy of a base policy (see the module docstring).
+
+    Args:
+        base: The base policy of the play-outs.
+        sequential: Robot by robot (never worse than ``base``) or every robot against the
+            base's joint action.
+
+    Attributes:
+        accept: After :meth:`improve`: ``(R,)`` bit masks of the moves that returned as much as
+            the chosen one (bit ``a`` for action ``a``), as the routing experts record them.
+        counts: ``decisions`` (robot decisions), ``changed`` (those that left the base
+            policy's move) and ``play_outs``.
+    """
+
+    def __init__(self, base: BasePolicy, sequential: bool = True) -> None:
+        self.base = base
+        self.sequential = sequential
+        self.accept = np.zeros(0, dtype=np.int64)
+        self.counts: Counter[str] = Counter()
+
+    def reset(self, seed: int | None = None) -> None:  # noqa: ARG002 (the harness's hook)
+        self.counts = Counter()
+
+    def improve(self, env: CoverageEnv) -> np.ndarray:
+        """Every robot's move ``(R,)`` at the environment's current state (left unchanged)."""
+        state = env.state()
+        chosen = np.asarray(self.base([state])[0]).copy()  # (R,)
+        base_action = chosen.copy()
+        allowed = np.asarray(state["action_mask"], dtype=bool)  # (R, 5)
+        num_robots = len(chosen)
+        accept = np.zeros(num_robots, dtype=np.int64)
+        groups = [[i] for i in range(num_robots)] if self.sequential else [range(num_robots)]
+        current = None  # the return of ``chosen`` as it stands, once known
+        for robots in groups:
+            joints, owner = [], []
+            for i in robots:
+                for move in np.flatnonzero(allowed[i]):
+                    if move != chosen[i]:
+                        joint = chosen.copy()
+                        joint[i] = move
+                        joints.append(joint)
+                        owner.append((i, int(move)))
+            if current is None:
+                joints.insert(0, chosen.copy())
+            values = play_out(env, self.base, np.array(joints)) if joints else np.zeros(0)
+            self.counts["play_outs"] += len(joints)
+            if current is None:
+                current, values = float(values[0]), values[1:]
+            start = chosen.copy()
+            best_of_group = current
+            for i in robots:
+                returns = {int(start[i]): current}
+                for (robot, move), value in zip(owner, values, strict=True):
+                    if robot == i:
+                        returns[move] = float(value)
+                best = max(returns.values())
+                if best > current:  # a strictly better move; among equals, the lowest
+                    chosen[i] = min(m for m, v in returns.items() if v == best)
+                accept[i] = sum(1 << m for m, v in returns.items() if v == best)
+                best_of_group = max(best_of_group, best)
+            if self.sequential:
+                current = best_of_group  # the return of the joint action with robot i's move
+        self.accept = accept
+        self.counts["decisions"] += num_robots
+        self.counts["changed"] += int((chosen != base_action).sum())
+        return chosen
+
+    def act_env(self, env: CoverageEnv) -> dict[str, int]:
+        """The rollout policy's actions (the evaluation harness's interface)."""
+        return dict(zip(env.possible_agents, self.improve(env).tolist(), strict=True))

@@ -1,0 +1,171 @@
+"""DAgger data from rollouts: a GNN's own episodes, each state labelled by its rollout policy.
+
+The learner (a GNN, argmax) plays the episodes; at every state each robot gets the move of the
+one-step rollout policy built on that same GNN (:class:`agents.rollout.RolloutPolicy`; by
+default every robot's best single deviation from the GNN's joint action, ``sequential=False``),
+and ``accept`` the moves that return as much. The labels are approximate policy iteration's
+improved policy, so training on them (``python scripts/train_bc.py ... "dagger.reuse=[OUT]"``)
+moves the learner toward a policy that is better than itself on its own states.
+
+Shards are written atomically (``OUT/shard_NNNNN.npz`` with a ``.json`` of per-episode counts);
+the same command resumes, and a saved config that differs (the model's SHA-256 among it) is
+refused.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from agents.datasets import Episode
+from agents.rollout import GNNArgmax, RolloutPolicy
+from marl_cover.env import CoverageEnv
+
+TASKS = ("coverage", "exploration")
+
+
+@dataclass
+class RolloutLabelConfig:
+    """Settings of :func:`collect_rollout_labels`.
+
+    Attributes:
+        task: ``"coverage"`` or ``"exploration"``.
+        checkpoint: The learner's model file; ``None``: the shipped model of ``task``.
+        episodes: Episodes to record.
+        seed: First episode seed (consecutive seeds; keep them clear of the evaluation seeds).
+        shard_size: Episodes per shard.
+        sequential: Label robot by robot (:class:`~agents.rollout.RolloutPolicy`) instead of
+            each robot's best deviation from the learner's joint action.
+        env: ``CoverageConfig`` overrides (``task`` is set from ``task``; ``hops`` defaults to
+            the model's).
+        out: Output folder.
+        progress: Print a line per episode.
+    """
+
+    task: str = "coverage"
+    checkpoint: str | None = None
+    episodes: int = 100
+    seed: int = 30_000
+    shard_size: int = 5
+    sequential: bool = False
+    env: dict[str, Any] = field(default_factory=lambda: {"map": "paper"})
+    out: str = "outputs/rollout_labels"
+    progress: bool = True
+
+    def __post_init__(self) -> None:
+        if self.task not in TASKS:
+            raise ValueError(f"task must be one of {TASKS}, got {self.task!r}")
+        if self.episodes < 1 or self.shard_size < 1:
+            raise ValueError(
+                f"episodes and shard_size must be >= 1, got {self.episodes} and {self.shard_size}"
+            )
+        if "task" in self.env:
+            raise ValueError("env.task: set the task with task=, not in env")
+
+    def model_path(self) -> Path:
+        from agents.models.shipped import shipped_model_path
+
+        return Path(self.checkpoint) if self.checkpoint else shipped_model_path(self.task)
+
+
+def record_rollout_episode(
+    env: CoverageEnv, learner: GNNArgmax, rollout: RolloutPolicy, seed: int
+) -> tuple[Episode, dict[str, Any]]:
+    """Plays one episode of ``learner`` and labels each state with ``rollout``.
+
+    Returns:
+        The episode (the learner's waypoints, the rollout labels and their ``accept`` sets) and
+        its counts: ``total`` (the learner's reward), ``decisions``, ``changed`` (labels that
+        differ from the learner's move).
+    """
+    env.reset(seed=seed)
+    start = env.snapshot()
+    positions, labels, accepts = [start.robot_node.copy()], [], []
+    total, changed = 0.0, 0
+    while env.agents:
+        own = learner([env.state()])[0]  # (R,)
+        label = rollout.improve(env)  # (R,)
+        labels.append(label)
+        accepts.append(rollout.accept.copy())
+        changed += int((label != own).sum())
+        total += float(env.apply_actions(own).new_interest.sum())
+        positions.append(env.snapshot().robot_node.copy())
+    episode = Episode(
+        seed=seed,
+        graph=start.graph,
+        interest=start.interest.copy(),
+        robot_node=np.array(positions, dtype=np.int32),
+        actions=np.array(labels, dtype=np.int8),
+        accept=np.array(accepts, dtype=np.int8),
+    )
+    counts = {"seed": seed, "total": total, "decisions": len(labels) * len(own), "changed": changed}
+    return episode, counts
+
+
+def collect_rollout_labels(config: RolloutLabelConfig) -> dict[str, Any]:
+    """Records ``config.episodes`` labelled episodes into shards under ``config.out``; shards
+    already there are kept. Returns the totals over all shards (also ``summary.json``)."""
+    import yaml
+
+    import marl_cover
+    from agents.cli import file_sha256, write_text_atomic
+    from agents.configuration import as_dict
+    from agents.datasets import SHARD_PATTERN, write_shard
+    from agents.models.policy import load_model
+    from agents.training.runs import check_same_run
+
+    out = Path(config.out)
+    out.mkdir(parents=True, exist_ok=True)
+    model_path = config.model_path()
+    record = {**as_dict(config), "model_sha256": file_sha256(model_path)}
+    config_path = out / "config.yaml"
+    check_same_run(config_path, record, ignored=("episodes", "progress", "out"))
+    write_text_atomic(config_path, yaml.safe_dump(record, sort_keys=False))
+    import torch
+
+    torch.set_num_threads(1)  # tiny tensors: threads only contend (run workers side by side)
+    model, _ = load_model(model_path)
+    env_options = {"hops": model.config.hops, **config.env, "task": config.task}
+    env = marl_cover.parallel_env(**env_options)
+    learner = GNNArgmax(model)
+    rollout = RolloutPolicy(learner, sequential=config.sequential)
+    stats = []
+    for shard in range(-(-config.episodes // config.shard_size)):
+        path = out / SHARD_PATTERN.format(shard)
+        stats_path = path.with_suffix(".json")
+        if path.exists() and stats_path.exists():
+            stats.append(json.loads(stats_path.read_text()))
+            continue
+        first = config.seed + shard * config.shard_size
+        episodes, rows = [], []
+        for seed in range(first, min(first + config.shard_size, config.seed + config.episodes)):
+            started = time.perf_counter()
+            episode, counts = record_rollout_episode(env, learner, rollout, seed)
+            episodes.append(episode)
+            rows.append(counts)
+            if config.progress:
+                print(
+                    f"episode {seed}: {counts['total']:.0f} points, {counts['changed']} of "
+                    f"{counts['decisions']} labels differ from the learner's moves "
+                    f"({time.perf_counter() - started:.0f} s)",
+                    flush=True,
+                )
+        write_shard(path, episodes)
+        write_text_atomic(stats_path, json.dumps(rows))
+        stats.append(rows)
+    rows = [row for shard_rows in stats for row in shard_rows]
+    decisions = sum(r["decisions"] for r in rows)
+    summary = {
+        "episodes": len(rows),
+        "decisions": decisions,
+        "changed": sum(r["changed"] for r in rows),
+        "changed_share": sum(r["changed"] for r in rows) / max(decisions, 1),
+        "learner_mean_total": float(np.mean([r["total"] for r in rows])),
+    }
+    write_text_atomic(out / "summary.json", json.dumps(summary, indent=2))
+    return summary
