@@ -1,11 +1,13 @@
 """DAgger data from rollouts: a GNN's own episodes, each state labelled by its rollout policy.
 
-The learner (a GNN, argmax) plays the episodes; at every state each robot gets the move of the
-one-step rollout policy built on that same GNN (:class:`agents.rollout.RolloutPolicy`; by
-default every robot's best single deviation from the GNN's joint action, ``sequential=False``),
-and ``accept`` the moves that return as much. The labels are approximate policy iteration's
-improved policy, so training on them (``python scripts/train_bc.py ... "dagger.reuse=[OUT]"``)
-moves the learner toward a policy that is better than itself on its own states.
+The learner (a GNN, argmax; with ``beta``, mixed with the labels) plays the episodes; at every
+state each robot gets the move of the one-step rollout policy built on that same GNN
+(:class:`agents.rollout.RolloutPolicy`; by default every robot's best single deviation from the
+GNN's joint action, ``sequential=False``), and ``accept`` the moves that return as much. The
+labels are approximate policy iteration's improved policy: training on them (``python
+scripts/train_bc.py ... "dagger.reuse=[OUT]"``) aims the learner at a policy that is better
+than itself on its own states (on exploration's windows it did not get there: see
+``docs/results/exploration.md``, session 34).
 
 Shards are written atomically (``OUT/shard_NNNNN.npz`` with a ``.json`` of per-episode counts);
 the same command resumes, and a saved config that differs (the model's SHA-256 among it) is
@@ -41,6 +43,9 @@ class RolloutLabelConfig:
         shard_size: Episodes per shard.
         sequential: Label robot by robot (:class:`~agents.rollout.RolloutPolicy`) instead of
             each robot's best deviation from the learner's joint action.
+        beta: Probability that a robot makes its labelled move instead of the learner's at a
+            step (DAgger's mixing, drawn from a generator seeded with the episode's seed);
+            ``1`` with ``sequential``: the episodes of the rollout policy itself.
         env: ``CoverageConfig`` overrides (``task`` is set from ``task``; ``hops`` defaults to
             the model's).
         out: Output folder.
@@ -53,6 +58,7 @@ class RolloutLabelConfig:
     seed: int = 30_000
     shard_size: int = 5
     sequential: bool = False
+    beta: float = 0.0
     env: dict[str, Any] = field(default_factory=lambda: {"map": "paper"})
     out: str = "outputs/rollout_labels"
     progress: bool = True
@@ -64,6 +70,8 @@ class RolloutLabelConfig:
             raise ValueError(
                 f"episodes and shard_size must be >= 1, got {self.episodes} and {self.shard_size}"
             )
+        if not 0.0 <= self.beta <= 1.0:
+            raise ValueError(f"beta must be in [0, 1], got {self.beta}")
         if "task" in self.env:
             raise ValueError("env.task: set the task with task=, not in env")
 
@@ -74,15 +82,17 @@ class RolloutLabelConfig:
 
 
 def record_rollout_episode(
-    env: CoverageEnv, learner: GNNArgmax, rollout: RolloutPolicy, seed: int
+    env: CoverageEnv, learner: GNNArgmax, rollout: RolloutPolicy, seed: int, beta: float = 0.0
 ) -> tuple[Episode, dict[str, Any]]:
-    """Plays one episode of ``learner`` and labels each state with ``rollout``.
+    """Plays one episode of ``learner`` (each robot on its label with probability ``beta``)
+    and labels each state with ``rollout``.
 
     Returns:
-        The episode (the learner's waypoints, the rollout labels and their ``accept`` sets) and
-        its counts: ``total`` (the learner's reward), ``decisions``, ``changed`` (labels that
+        The episode (the waypoints played, the rollout labels and their ``accept`` sets) and
+        its counts: ``total`` (the reward played), ``decisions``, ``changed`` (labels that
         differ from the learner's move).
     """
+    rng = np.random.default_rng(seed)
     env.reset(seed=seed)
     start = env.snapshot()
     positions, labels, accepts = [start.robot_node.copy()], [], []
@@ -93,7 +103,8 @@ def record_rollout_episode(
         labels.append(label)
         accepts.append(rollout.accept.copy())
         changed += int((label != own).sum())
-        total += float(env.apply_actions(own).new_interest.sum())
+        played = np.where(rng.random(len(own)) < beta, label, own) if beta > 0 else own
+        total += float(env.apply_actions(played).new_interest.sum())
         positions.append(env.snapshot().robot_node.copy())
     episode = Episode(
         seed=seed,
@@ -124,7 +135,8 @@ def collect_rollout_labels(config: RolloutLabelConfig) -> dict[str, Any]:
     model_path = config.model_path()
     record = {**as_dict(config), "model_sha256": file_sha256(model_path)}
     config_path = out / "config.yaml"
-    check_same_run(config_path, record, ignored=("episodes", "progress", "out"))
+    ignored = ("episodes", "progress", "out")
+    check_same_run(config_path, record, ignored, defaults=as_dict(RolloutLabelConfig()))
     write_text_atomic(config_path, yaml.safe_dump(record, sort_keys=False))
     import torch
 
@@ -145,7 +157,7 @@ def collect_rollout_labels(config: RolloutLabelConfig) -> dict[str, Any]:
         episodes, rows = [], []
         for seed in range(first, min(first + config.shard_size, config.seed + config.episodes)):
             started = time.perf_counter()
-            episode, counts = record_rollout_episode(env, learner, rollout, seed)
+            episode, counts = record_rollout_episode(env, learner, rollout, seed, config.beta)
             episodes.append(episode)
             rows.append(counts)
             if config.progress:

@@ -191,3 +191,19 @@ def test_cli_plays_the_rollout_policy(tmp_path, random_model_file) -> None:
     assert all(r >= g for r, g in zip(rewards["gnn_rollout"], rewards["gnn"], strict=True))
     refused = run_script("evaluate.py", "policy=gnn_rollout", "checkpoint=a.pt,b.pt")
     assert refused.returncode != 0 and "not an ensemble" in refused.stderr
+
+
+def test_beta_one_records_the_rollout_policys_own_episode() -> None:
+    from agents.models import AggregationGNN, GNNConfig
+    from agents.rollout_labels import RolloutLabelConfig, record_rollout_episode
+
+    torch.manual_seed(3)
+    base = GNNArgmax(AggregationGNN(GNNConfig(kind="nonlinear", hops=3)).double())
+    env = marl_cover.parallel_env(num_robots=3, hops=3, max_steps=8)
+    episode, counts = record_rollout_episode(env, base, RolloutPolicy(base), seed=5, beta=1.0)
+    played = evaluate(env, RolloutPolicy(base), [5]).results[0].reward
+    assert counts["total"] == played == episode.reward()
+    learner_only, _ = record_rollout_episode(env, base, RolloutPolicy(base), seed=5)
+    assert counts["total"] >= learner_only.reward()
+    with pytest.raises(ValueError, match="beta must be in"):
+        RolloutLabelConfig(beta=1.5)
