@@ -17,12 +17,15 @@ skipping the shards already on disk: no episode is lost or written twice.
 from __future__ import annotations
 
 import io
+import json
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from agents.cli import write_bytes_atomic
+from agents.cli import write_bytes_atomic, write_text_atomic
 from marl_cover.discovery import discovery_steps, frontier_of, known_neighbors, sensor_footprints
 from marl_cover.ego import PaddedShape, build_ego_graphs, waypoint_features
 from marl_cover.env import CoverageEnv
@@ -250,3 +253,42 @@ def load_dataset(folder: str | Path) -> list[Episode]:
         raise FileNotFoundError(f"no dataset shards (shard_*.npz) in {folder}")
     episodes = [e for shard in shards for e in read_shard(shard)]
     return sorted(episodes, key=lambda e: e.seed)
+
+
+def record_shards(
+    out: Path,
+    first_seed: int,
+    count: int,
+    shard_size: int,
+    record: Callable[[int], tuple[Episode, dict[str, Any]]],
+) -> list[dict[str, Any]]:
+    """Records ``count`` episodes, seeds ``first_seed...``, into resumable shards under ``out``.
+
+    Shard ``k`` holds the seeds ``first_seed + k * shard_size ...`` and is written atomically
+    with a ``.json`` of ``record``'s per-episode counts beside it; a shard whose two files are
+    both there is kept, so the same call after an interrupt records only what is missing.
+
+    Args:
+        out: The folder (it must exist).
+        first_seed: Seed of the first episode.
+        count: Episodes in all.
+        shard_size: Episodes per shard.
+        record: Plays and labels the episode of a seed: the episode and its counts.
+
+    Returns:
+        The counts of every episode, in seed order (those of kept shards read back).
+    """
+    rows: list[dict[str, Any]] = []
+    for shard in range(-(-count // shard_size)):
+        path = out / SHARD_PATTERN.format(shard)
+        stats_path = path.with_suffix(".json")
+        if path.exists() and stats_path.exists():
+            rows.extend(json.loads(stats_path.read_text()))
+            continue
+        first = first_seed + shard * shard_size
+        seeds = range(first, min(first + shard_size, first_seed + count))
+        recorded = [record(seed) for seed in seeds]
+        write_shard(path, [episode for episode, _ in recorded])
+        write_text_atomic(stats_path, json.dumps([counts for _, counts in recorded]))
+        rows.extend(counts for _, counts in recorded)
+    return rows

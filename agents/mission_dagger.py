@@ -203,7 +203,7 @@ def collect_mission_dagger(config: MissionDaggerConfig) -> dict[str, Any]:
 
     from agents.cli import file_sha256, write_text_atomic
     from agents.configuration import as_dict
-    from agents.datasets import SHARD_PATTERN, write_shard
+    from agents.datasets import record_shards
     from agents.experts import RoutingExpert
     from agents.training.runs import check_same_run
 
@@ -216,48 +216,34 @@ def collect_mission_dagger(config: MissionDaggerConfig) -> dict[str, Any]:
     write_text_atomic(config_path, yaml.safe_dump(record, sort_keys=False))
     env = mission.make_env()
     learner = make_mission_policy("gnn", mission)
-    stats = []
-    num_shards = -(-config.missions // config.shard_size)
-    for shard in range(num_shards):
-        path = out / SHARD_PATTERN.format(shard)
-        stats_path = path.with_suffix(".json")
-        if path.exists() and stats_path.exists():
-            stats.append(json.loads(stats_path.read_text()))
-            continue
-        first = config.seed + shard * config.shard_size
-        seeds = range(first, min(first + config.shard_size, config.seed + config.missions))
-        episodes, rows = [], []
-        for seed in seeds:
-            expert = MissionExpert(
-                RoutingExpert(
-                    mode="receding",
-                    horizon=config.expert_horizon,
-                    clock=False,
-                    max_iterations=config.expert_iterations,
-                    seed=seed,
-                )
+
+    def record_one(seed: int) -> tuple[Episode, dict[str, Any]]:
+        expert = MissionExpert(
+            RoutingExpert(
+                mode="receding",
+                horizon=config.expert_horizon,
+                clock=False,
+                max_iterations=config.expert_iterations,
+                seed=seed,
             )
-            done = record_mission(env, learner, expert, seed, config.beta)
-            episodes.append(done.episode)
-            row = {
-                "seed": seed,
-                "total": done.total,
-                "decisions": done.episode.num_steps,
-                "labels": done.labels,
-                "expert_moves": done.expert_moves,
-                "agreed": done.agreed,
-            }
-            rows.append(row)
-            if config.progress:
-                print(
-                    f"mission {seed}: {done.total} points, {done.labels} labelled decisions, "
-                    f"learner agrees {done.agreed / max(done.labels, 1):.3f}",
-                    flush=True,
-                )
-        write_shard(path, episodes)
-        write_text_atomic(stats_path, json.dumps(rows))
-        stats.append(rows)
-    rows = [row for shard_rows in stats for row in shard_rows]
+        )
+        done = record_mission(env, learner, expert, seed, config.beta)
+        if config.progress:
+            print(
+                f"mission {seed}: {done.total} points, {done.labels} labelled decisions, "
+                f"learner agrees {done.agreed / max(done.labels, 1):.3f}",
+                flush=True,
+            )
+        return done.episode, {
+            "seed": seed,
+            "total": done.total,
+            "decisions": done.episode.num_steps,
+            "labels": done.labels,
+            "expert_moves": done.expert_moves,
+            "agreed": done.agreed,
+        }
+
+    rows = record_shards(out, config.seed, config.missions, config.shard_size, record_one)
     summary = {
         "missions": len(rows),
         "decisions": sum(r["decisions"] for r in rows),

@@ -126,7 +126,7 @@ def collect_rollout_labels(config: RolloutLabelConfig) -> dict[str, Any]:
     import marl_cover
     from agents.cli import file_sha256, write_text_atomic
     from agents.configuration import as_dict
-    from agents.datasets import SHARD_PATTERN, write_shard
+    from agents.datasets import record_shards
     from agents.models.policy import load_model
     from agents.training.runs import check_same_run
 
@@ -146,31 +146,20 @@ def collect_rollout_labels(config: RolloutLabelConfig) -> dict[str, Any]:
     env = marl_cover.parallel_env(**env_options)
     learner = GNNArgmax(model)
     rollout = RolloutPolicy(learner, sequential=config.sequential)
-    stats = []
-    for shard in range(-(-config.episodes // config.shard_size)):
-        path = out / SHARD_PATTERN.format(shard)
-        stats_path = path.with_suffix(".json")
-        if path.exists() and stats_path.exists():
-            stats.append(json.loads(stats_path.read_text()))
-            continue
-        first = config.seed + shard * config.shard_size
-        episodes, rows = [], []
-        for seed in range(first, min(first + config.shard_size, config.seed + config.episodes)):
-            started = time.perf_counter()
-            episode, counts = record_rollout_episode(env, learner, rollout, seed, config.beta)
-            episodes.append(episode)
-            rows.append(counts)
-            if config.progress:
-                print(
-                    f"episode {seed}: {counts['total']:.0f} points, {counts['changed']} of "
-                    f"{counts['decisions']} labels differ from the learner's moves "
-                    f"({time.perf_counter() - started:.0f} s)",
-                    flush=True,
-                )
-        write_shard(path, episodes)
-        write_text_atomic(stats_path, json.dumps(rows))
-        stats.append(rows)
-    rows = [row for shard_rows in stats for row in shard_rows]
+
+    def record_one(seed: int) -> tuple[Episode, dict[str, Any]]:
+        started = time.perf_counter()
+        episode, counts = record_rollout_episode(env, learner, rollout, seed, config.beta)
+        if config.progress:
+            print(
+                f"episode {seed}: {counts['total']:.0f} points, {counts['changed']} of "
+                f"{counts['decisions']} labels differ from the learner's moves "
+                f"({time.perf_counter() - started:.0f} s)",
+                flush=True,
+            )
+        return episode, counts
+
+    rows = record_shards(out, config.seed, config.episodes, config.shard_size, record_one)
     decisions = sum(r["decisions"] for r in rows)
     summary = {
         "episodes": len(rows),
