@@ -43,6 +43,8 @@ class RolloutLabelConfig:
         shard_size: Episodes per shard.
         sequential: Label robot by robot (:class:`~agents.rollout.RolloutPolicy`) instead of
             each robot's best deviation from the learner's joint action.
+        labels: ``"rollout"``, or ``"own"``: the learner's own moves as labels (a control:
+            training on those measures what retraining alone does to the learner).
         beta: Probability that a robot makes its labelled move instead of the learner's at a
             step (DAgger's mixing, drawn from a generator seeded with the episode's seed);
             ``1`` with ``sequential``: the episodes of the rollout policy itself.
@@ -58,6 +60,7 @@ class RolloutLabelConfig:
     seed: int = 30_000
     shard_size: int = 5
     sequential: bool = False
+    labels: str = "rollout"
     beta: float = 0.0
     env: dict[str, Any] = field(default_factory=lambda: {"map": "paper"})
     out: str = "outputs/rollout_labels"
@@ -70,6 +73,8 @@ class RolloutLabelConfig:
             raise ValueError(
                 f"episodes and shard_size must be >= 1, got {self.episodes} and {self.shard_size}"
             )
+        if self.labels not in ("rollout", "own"):
+            raise ValueError(f"labels must be 'rollout' or 'own', got {self.labels!r}")
         if not 0.0 <= self.beta <= 1.0:
             raise ValueError(f"beta must be in [0, 1], got {self.beta}")
         if "task" in self.env:
@@ -82,10 +87,14 @@ class RolloutLabelConfig:
 
 
 def record_rollout_episode(
-    env: CoverageEnv, learner: GNNArgmax, rollout: RolloutPolicy, seed: int, beta: float = 0.0
+    env: CoverageEnv,
+    learner: GNNArgmax,
+    rollout: RolloutPolicy | None,
+    seed: int,
+    beta: float = 0.0,
 ) -> tuple[Episode, dict[str, Any]]:
     """Plays one episode of ``learner`` (each robot on its label with probability ``beta``)
-    and labels each state with ``rollout``.
+    and labels each state with ``rollout`` (``None``: with the learner's own moves).
 
     Returns:
         The episode (the waypoints played, the rollout labels and their ``accept`` sets) and
@@ -99,9 +108,9 @@ def record_rollout_episode(
     total, changed = 0.0, 0
     while env.agents:
         own = learner([env.state()])[0]  # (R,)
-        label = rollout.improve(env)  # (R,)
+        label = own if rollout is None else rollout.improve(env)  # (R,)
         labels.append(label)
-        accepts.append(rollout.accept.copy())
+        accepts.append(1 << own if rollout is None else rollout.accept.copy())
         changed += int((label != own).sum())
         played = np.where(rng.random(len(own)) < beta, label, own) if beta > 0 else own
         total += float(env.apply_actions(played).new_interest.sum())
@@ -145,7 +154,7 @@ def collect_rollout_labels(config: RolloutLabelConfig) -> dict[str, Any]:
     env_options = {"hops": model.config.hops, **config.env, "task": config.task}
     env = marl_cover.parallel_env(**env_options)
     learner = GNNArgmax(model)
-    rollout = RolloutPolicy(learner, sequential=config.sequential)
+    rollout = RolloutPolicy(learner, config.sequential) if config.labels == "rollout" else None
 
     def record_one(seed: int) -> tuple[Episode, dict[str, Any]]:
         started = time.perf_counter()

@@ -1,15 +1,19 @@
 """Record a GNN's own episodes, each state labelled by its one-step rollout policy (DAgger data).
 
     python scripts/collect_rollout_labels.py [--config FILE] [key=value ...]
-    e.g.  python scripts/collect_rollout_labels.py task=exploration episodes=100 seed=30000 \
-              out=outputs/rollout_labels/exploration
+    e.g.  python scripts/collect_rollout_labels.py task=exploration episodes=100 seed=30000
+          (then, beside it, the same with seed=40000 and another out=)
 
 Each robot's label is the move that returns most when it alone leaves the GNN's move for one
 step and every robot follows the GNN to the end of the episode (exact play-outs on copies of the
-environment, ``agents.rollout``). Writes ``OUT/shard_NNNNN.npz`` (``shard_size`` episodes each,
-atomically, with a ``.json`` of per-episode counts beside it), ``OUT/config.yaml`` and
-``OUT/summary.json``. Running the same command again finishes the shards that are missing; two
-commands with different ``seed`` and ``out`` run side by side. Train on them with
+environment, ``agents.rollout``). ``sequential=true`` labels robot by robot (the rollout
+policy's own moves), ``labels=own`` with the GNN's own moves (a control for retraining), and
+``beta`` plays the labels instead of the GNN's moves with that probability.
+
+Writes ``OUT/shard_NNNNN.npz`` (``shard_size`` episodes each, atomically, with a ``.json`` of
+per-episode counts beside it), ``OUT/config.yaml`` and ``OUT/summary.json``. Running the same
+command again finishes the shards that are missing; two commands with different ``seed`` and
+``out`` run side by side. Train on them with
 ``python scripts/train_bc.py ... "dagger.reuse=[OUT,...]"``.
 """
 

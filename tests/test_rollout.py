@@ -207,3 +207,24 @@ def test_beta_one_records_the_rollout_policys_own_episode() -> None:
     assert counts["total"] >= learner_only.reward()
     with pytest.raises(ValueError, match="beta must be in"):
         RolloutLabelConfig(beta=1.5)
+
+
+def test_own_labels_are_the_learners_moves() -> None:
+    from agents.models import AggregationGNN, GNNConfig
+    from agents.rollout_labels import RolloutLabelConfig, record_rollout_episode
+
+    torch.manual_seed(4)
+    base = GNNArgmax(AggregationGNN(GNNConfig(kind="nonlinear", hops=3)).double())
+    env = marl_cover.parallel_env(num_robots=3, hops=3, max_steps=6)
+    episode, counts = record_rollout_episode(env, base, None, seed=2)
+    labelled, _ = record_rollout_episode(env, base, RolloutPolicy(base), seed=2)
+    np.testing.assert_array_equal(episode.robot_node, labelled.robot_node)  # the same states
+    env.reset(seed=2)
+    for step in range(episode.num_steps):
+        own = base([env.state()])[0]
+        np.testing.assert_array_equal(episode.actions[step], own)
+        np.testing.assert_array_equal(episode.accept[step], 1 << own)
+        env.apply_actions(own)
+    assert counts["changed"] == 0
+    with pytest.raises(ValueError, match="labels must be 'rollout' or 'own'"):
+        RolloutLabelConfig(labels="expert")
