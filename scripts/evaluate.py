@@ -31,8 +31,8 @@ files play as one ensemble, ``agents.models.policy.EnsemblePolicy``). A GNN runs
 receptive field it was trained with: ``hops`` defaults to the model's (the largest of an
 ensemble's). ``gnn_rollout``: the one-step rollout policy of that GNN (``agents.rollout``: each
 robot's move is the one whose exact play-out, every robot then on the GNN's argmax, returns
-most; robot by robot, or ``gnn.sequential=false`` each against the GNN's moves), an omniscient
-planner that is never worse than its GNN, about 20-40 s an episode on the paper's windows.
+most; robot by robot, which is never worse than the GNN, or ``gnn.sequential=false`` each
+against the GNN's moves), an omniscient planner, about 22 s an episode on the paper's windows.
 Maps: ``city`` (default), ``paper`` (windows of the paper's map), ``paper_full``,
 ``paper_large``, or a grid file. Any other ``key=value`` is a field of ``CoverageConfig``
 (``num_robots=10``, ``max_steps=49``, ...); an unknown key is an error.
