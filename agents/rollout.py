@@ -12,9 +12,9 @@ the move whose play-out returns most:
   action returns at least the base policy's from that state, and the rollout policy's episode
   returns at least the base policy's (tested).
 - ``sequential=False`` (every robot against the base policy's joint action): each robot's best
-  single deviation, all evaluated in one batch. These are the labels a decentralized learner
-  can hope to imitate, each robot's best response to a team that plays the base policy; their
-  combination has no guarantee.
+  single deviation, all evaluated in one batch: each robot's best response to a team that
+  plays the base policy, as labels for a decentralized learner. Their combination has no
+  guarantee (and a GNN trained on them got worse: ``docs/results/exploration.md``, session 34).
 
 The rollout policy reads the whole state and plays the future out: it is an omniscient planner,
 as the routing experts are, and a teacher for DAgger (``scripts/collect_rollout_labels.py``
