@@ -67,16 +67,6 @@ class GNNArgmax:
         return logits.argmax(dim=-1).numpy()
 
 
-class StatePolicyBase:
-    """Any policy with ``act_state(state)`` as a :class:`BasePolicy` (one call per state)."""
-
-    def __init__(self, policy: Any) -> None:
-        self.policy = policy
-
-    def __call__(self, states: list[dict[str, np.ndarray]]) -> np.ndarray:
-        return np.stack([np.asarray(self.policy.act_state(s)) for s in states])
-
-
 def fork(env: CoverageEnv) -> CoverageEnv:
     """An independent copy of ``env`` mid-episode (its map is shared: it never changes)."""
     graph = env.snapshot().graph

@@ -26,9 +26,8 @@ import numpy as np
 
 from agents.datasets import Episode
 from agents.rollout import GNNArgmax, RolloutPolicy
+from marl_cover.config import TASKS
 from marl_cover.env import CoverageEnv
-
-TASKS = ("coverage", "exploration")
 
 
 @dataclass
@@ -130,6 +129,7 @@ def record_rollout_episode(
 def collect_rollout_labels(config: RolloutLabelConfig) -> dict[str, Any]:
     """Records ``config.episodes`` labelled episodes into shards under ``config.out``; shards
     already there are kept. Returns the totals over all shards (also ``summary.json``)."""
+    import torch
     import yaml
 
     import marl_cover
@@ -147,8 +147,6 @@ def collect_rollout_labels(config: RolloutLabelConfig) -> dict[str, Any]:
     ignored = ("episodes", "progress", "out")
     check_same_run(config_path, record, ignored, defaults=as_dict(RolloutLabelConfig()))
     write_text_atomic(config_path, yaml.safe_dump(record, sort_keys=False))
-    import torch
-
     torch.set_num_threads(1)  # tiny tensors: threads only contend (run workers side by side)
     model, _ = load_model(model_path)
     env_options = {"hops": model.config.hops, **config.env, "task": config.task}
