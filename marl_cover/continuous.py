@@ -297,7 +297,7 @@ class QuadrotorCoverageEnv(CoverageEnv):
         and to brake from it when robots stop at waypoints (``"arrival"``); at least one
         control period."""
         q = self.dynamics.quadrotor
-        cruise = self._graph.cell_size / q.max_speed
+        cruise = self._episode_map().cell_size / q.max_speed
         if self.dynamics.retarget == "arrival" and not math.isinf(q.max_accel):
             cruise += q.max_speed / q.max_accel
         return max(cruise, self.dynamics.control_period)
@@ -314,10 +314,10 @@ class QuadrotorCoverageEnv(CoverageEnv):
         """Starts a mission: the discrete reset, then robots hovering over their start
         waypoints at their altitudes. ``seed`` and ``options`` as in :meth:`CoverageEnv.reset`."""
         self._start_episode(seed, options)
-        d = self.dynamics
+        graph, d = self._episode_map(), self.dynamics
         self._visit_radius = d.visit_radius
         if self._visit_radius is None:
-            self._visit_radius = 0.5 * self._graph.cell_size
+            self._visit_radius = 0.5 * graph.cell_size
             if self._visit_radius < d.arrival_radius:
                 raise ValueError(
                     f"arrival_radius {d.arrival_radius} m exceeds half the map's cell size "
@@ -325,7 +325,7 @@ class QuadrotorCoverageEnv(CoverageEnv):
                 )
         r = self.config.num_robots
         self._altitude = np.linspace(*d.altitude_range, r)  # (R,)
-        start = np.column_stack([self._graph.positions[self._robot_node], self._altitude])
+        start = np.column_stack([graph.positions[self._robot_node], self._altitude])
         self._team = QuadrotorTeam(
             d.quadrotor, start, d.noise_std, d.delay, self._rng, backend=d.backend
         )
@@ -365,7 +365,7 @@ class QuadrotorCoverageEnv(CoverageEnv):
 
     def _propose(self, action: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Targets the ready robots ask for (from their snapped waypoints); others keep theirs."""
-        slots = action_targets(self._graph, self._robot_node)  # (R, 5)
+        slots = action_targets(self._episode_map(), self._robot_node)  # (R, 5)
         wanted = slots[np.arange(len(action)), action]
         invalid = (wanted < 0) & self._ready
         if invalid.any() and self.config.invalid_action == "raise":
@@ -380,7 +380,8 @@ class QuadrotorCoverageEnv(CoverageEnv):
     def _fly(self) -> np.ndarray:
         """Integrates whole control periods; returns each robot's new points of interest."""
         d = self.dynamics
-        goal = np.column_stack([self._graph.positions[self._target], self._altitude])  # (R, 3)
+        positions = self._episode_map().positions  # (N, 2)
+        goal = np.column_stack([positions[self._target], self._altitude])  # (R, 3)
         new_interest = np.zeros(self.config.num_robots, dtype=np.int64)
         r = self.config.num_robots
         track = np.empty((d.substeps, r, 3))  # positions at each integration step
@@ -396,7 +397,7 @@ class QuadrotorCoverageEnv(CoverageEnv):
             self._count_near_misses()
             measured = self._team.measure()
             self._robot_node, _ = self._nearest(measured)
-            offset = measured[:, :2] - self._graph.positions[self._target]
+            offset = measured[:, :2] - positions[self._target]
             self._arrived = np.einsum("ij,ij->i", offset, offset) <= d.arrival_radius**2
             self._ready = self._arrived if d.retarget == "arrival" else np.ones_like(self._ready)
             done = self._tick >= d.max_ticks or self._all_covered()
@@ -405,8 +406,9 @@ class QuadrotorCoverageEnv(CoverageEnv):
 
     def _nearest(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Nearest waypoint ``(R,)`` and its distance in the plane ``(R,)``."""
-        if self._locator is None or self._locator.graph is not self._graph:
-            self._locator = WaypointLocator(self._graph, self.dynamics.backend)
+        graph = self._episode_map()
+        if self._locator is None or self._locator.graph is not graph:
+            self._locator = WaypointLocator(graph, self.dynamics.backend)
         return self._locator.nearest(points)
 
     def _count_near_misses(self) -> None:

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -154,7 +155,12 @@ class QuadrotorTeam:
         """Measured positions ``(R, 3)``: the true ones plus the measurement noise."""
         if self.noise_std == 0:
             return self.position
-        return self.position + self._rng.normal(0.0, self.noise_std, self.position.shape)
+        return self.position + self._noise(self.position.shape)
+
+    def _noise(self, shape: tuple[int, ...]) -> np.ndarray:
+        """Measurement noise of ``shape`` (a generator is required whenever ``noise_std > 0``)."""
+        assert self._rng is not None
+        return self._rng.normal(0.0, self.noise_std, shape)
 
     def step(self, targets: np.ndarray) -> None:
         """Sends ``targets`` ``(R, 3)`` and advances every body by one ``dt``."""
@@ -171,7 +177,7 @@ class QuadrotorTeam:
         p = self.params
         targets = np.asarray(targets, dtype=np.float64)
         if self._kernel is not None:
-            self._advance_compiled(targets, steps, track)
+            self._advance_compiled(self._kernel, targets, steps, track)
             return
         drag_rate, dt = self._drag_rate, p.dt
         position, velocity = self.position, self.velocity
@@ -189,7 +195,9 @@ class QuadrotorTeam:
                 track[k] = position
         self.velocity, self.acceleration = velocity, acceleration
 
-    def _advance_compiled(self, targets: np.ndarray, steps: int, track: np.ndarray | None) -> None:
+    def _advance_compiled(
+        self, kernel: Callable[..., None], targets: np.ndarray, steps: int, track: np.ndarray | None
+    ) -> None:
         """:meth:`advance` by the compiled kernel: the targets acting at each step and the
         noise of each measurement are laid out first (the noise drawn in one call, the same
         numbers as one call per step)."""
@@ -201,14 +209,14 @@ class QuadrotorTeam:
         for k in range(min(steps, len(old))):
             acting[k] = old[k]
         acting[len(old) :] = targets
-        self._pipeline.extend([targets] * min(steps, self._pipeline.maxlen))
+        self._pipeline.extend([targets] * min(steps, len(self._pipeline)))  # full: maxlen
         noise = np.empty((0, r, 3))  # (steps, R, 3) with noise, else none
         if self.noise_std > 0:
-            noise = self._rng.normal(0.0, self.noise_std, (steps, r, 3))
+            noise = self._noise((steps, r, 3))
         position, velocity = self.position.copy(), self.velocity.copy()
         acceleration = np.empty_like(position)
         out = track if track is not None else np.empty((steps, r, 3))
-        self._kernel(
+        kernel(
             position,
             velocity,
             acceleration,

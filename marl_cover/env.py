@@ -298,16 +298,17 @@ class CoverageEnv(ParallelEnv):
             raise ValueError(f"seed must be a non-negative integer or None, got {seed!r}")
         if seed is not None or self._rng is None:
             self._rng = np.random.default_rng(seed)
+        rng = self._rng
         options = dict(options or {})
         for key in sorted(set(options) - set(RESET_OPTIONS)):
             warnings.warn(f"reset ignores unknown option {key!r}", stacklevel=3)
-        graph = self._map_source.sample(self._rng)
+        graph = self._map_source.sample(rng)
         if graph is not self._graph:
             self._graph = graph
             self._state_builder = StateBuilder(graph, self.config.num_robots, self._state_shape)
             self._footprint = self._sensor_footprints(graph)
-        self._interest = self._draw_interest(graph, options.get("interest_nodes"))
-        self._robot_node = self._draw_starts(graph, options.get("robot_nodes"))
+        self._interest = self._draw_interest(graph, rng, options.get("interest_nodes"))
+        self._robot_node = self._draw_starts(graph, rng, options.get("robot_nodes"))
         self._visited = np.zeros(graph.num_nodes, dtype=bool)
         self._visited[self._robot_node] = True
         self._waypoint_features = waypoint_features(self._interest & ~self._visited)
@@ -338,17 +339,19 @@ class CoverageEnv(ParallelEnv):
         changed = self._discovery.sense(self._robot_node)
         self._waypoint_features[changed, 3] = self._discovery.frontier[changed]
 
-    def _draw_interest(self, graph: SpatialGraph, given: Any) -> np.ndarray:
+    def _draw_interest(
+        self, graph: SpatialGraph, rng: np.random.Generator, given: Any
+    ) -> np.ndarray:
         interest = np.zeros(graph.num_nodes, dtype=bool)
         if given is not None:
             nodes = self._check_nodes(graph, given, "interest_nodes")
         else:
             count = int(self.config.interest_fraction * graph.num_nodes)
-            nodes = self._rng.choice(graph.num_nodes, size=count, replace=False)
+            nodes = rng.choice(graph.num_nodes, size=count, replace=False)
         interest[nodes] = True
         return interest
 
-    def _draw_starts(self, graph: SpatialGraph, given: Any) -> np.ndarray:
+    def _draw_starts(self, graph: SpatialGraph, rng: np.random.Generator, given: Any) -> np.ndarray:
         r = self.config.num_robots
         if given is not None:
             nodes = self._check_nodes(graph, given, "robot_nodes")
@@ -359,14 +362,14 @@ class CoverageEnv(ParallelEnv):
             return nodes
         if graph.num_nodes < r:
             raise ValueError(f"{r} robots do not fit on a map of {graph.num_nodes} waypoints")
-        centre = int(self._rng.integers(graph.num_nodes))
+        centre = int(rng.integers(graph.num_nodes))
         ball = graph.bfs_ball(centre, self.config.start_density * r)
         if len(ball) < r:
             raise ValueError(
                 f"the component around waypoint {centre} has {len(ball)} waypoints, fewer than "
                 f"the {r} robots"
             )
-        return self._rng.choice(ball, size=r, replace=False).astype(np.int64)
+        return rng.choice(ball, size=r, replace=False).astype(np.int64)
 
     @staticmethod
     def _check_nodes(graph: SpatialGraph, given: Any, key: str) -> np.ndarray:
@@ -461,7 +464,7 @@ class CoverageEnv(ParallelEnv):
 
     def _targets(self, action: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Target waypoint of each robot, and which actions were masked out (and become stays)."""
-        slots = action_targets(self._graph, self._robot_node)  # (R, 5)
+        slots = action_targets(self._episode_map(), self._robot_node)  # (R, 5)
         target = slots[np.arange(len(action)), action]
         invalid = target < 0
         if invalid.any() and self.config.invalid_action == "raise":
@@ -525,10 +528,10 @@ class CoverageEnv(ParallelEnv):
 
     def observe_batch(self) -> dict[str, np.ndarray]:
         """Every robot's observation stacked on a leading robot axis (fresh arrays)."""
-        self._require_episode()
+        graph = self._episode_map()
         robot_node, features = self._view()
         batch = build_ego_graphs(
-            self._graph,
+            graph,
             robot_node,
             features,
             self.config.hops,
@@ -541,7 +544,8 @@ class CoverageEnv(ParallelEnv):
 
     def state(self) -> dict[str, np.ndarray]:
         """The whole graph in the observation encoding (see the module docstring)."""
-        self._require_episode()
+        self._episode_map()
+        assert self._state_builder is not None  # built with the map
         state = self._state_builder.build(*self._view(), self._discovery)
         state["steps_left"] = np.array(self._steps_left(), dtype=np.int64)
         return state
@@ -557,9 +561,8 @@ class CoverageEnv(ParallelEnv):
 
     def snapshot(self) -> CoverageSnapshot:
         """A read-only copy of the episode's state for planners."""
-        self._require_episode()
         return CoverageSnapshot(
-            graph=self._graph,
+            graph=self._episode_map(),
             robot_node=self._robot_node.copy(),
             interest=self._interest.copy(),
             visited=self._visited.copy(),
@@ -572,12 +575,18 @@ class CoverageEnv(ParallelEnv):
     def _discovered(self) -> np.ndarray:
         """Waypoints known to the team, ``(N,)`` bool (a copy; all of them in coverage)."""
         if self._discovery is None:
-            return np.ones(self._graph.num_nodes, dtype=bool)
+            return np.ones(self._episode_map().num_nodes, dtype=bool)
         return self._discovery.discovered.copy()
 
-    def _require_episode(self) -> None:
+    def _episode_map(self) -> SpatialGraph:
+        """This episode's map.
+
+        Raises:
+            RuntimeError: no episode has started (``reset()`` was not called yet).
+        """
         if self._graph is None:
             raise RuntimeError("no episode yet; call reset() first")
+        return self._graph
 
     # ------------------------------------------------------------------ rendering
     def render(self) -> np.ndarray | None:
@@ -588,13 +597,13 @@ class CoverageEnv(ParallelEnv):
         if self.render_mode is None:
             gymnasium.logger.warn("render() called without a render_mode; nothing drawn")
             return None
-        self._require_episode()
+        graph = self._episode_map()
         from marl_cover.render import Renderer
 
         if self._renderer is None:
             self._renderer = Renderer(self.render_mode)
         return self._renderer.draw(
-            self._graph,
+            graph,
             self._robot_node,
             self._interest,
             self._visited,
@@ -609,7 +618,7 @@ class CoverageEnv(ParallelEnv):
     def _discovery_text(self) -> str:
         if self._discovery is None:
             return ""
-        return f"   discovered {self._discovery.num_discovered}/{self._graph.num_nodes}"
+        return f"   discovered {self._discovery.num_discovered}/{self._episode_map().num_nodes}"
 
     def _progress_text(self) -> str:
         return f"step {self._num_steps}/{self.config.max_steps}"

@@ -61,7 +61,9 @@ def draw_map(
         keep = edges & (senders < receivers)
         segments = np.stack([pos[senders[keep]], pos[receivers[keep]]], axis=1)
         ax.add_collection(
-            LineCollection(segments, colors=WAYPOINT_COLOUR, linewidths=0.5, alpha=alpha, zorder=0)
+            LineCollection(
+                list(segments), colors=WAYPOINT_COLOUR, linewidths=0.5, alpha=alpha, zorder=0
+            )
         )
         ax.scatter(
             *pos[nodes & ~interest].T, s=size * 0.3, c=WAYPOINT_COLOUR, alpha=alpha, zorder=1

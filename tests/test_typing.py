@@ -1,0 +1,18 @@
+"""``marl_cover`` ships ``py.typed``: its own code must type-check (``[tool.mypy]`` in
+pyproject.toml), so the annotations users' type checkers read are the ones the code obeys."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def test_marl_cover_type_checks(monkeypatch: pytest.MonkeyPatch) -> None:
+    api = pytest.importorskip("mypy.api")
+    monkeypatch.chdir(ROOT)  # the pyproject's [tool.mypy] section and its cache
+    stdout, stderr, status = api.run(["--config-file", "pyproject.toml"])
+    assert status == 0, stdout + stderr
+    assert "Success: no issues found" in stdout
