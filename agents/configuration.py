@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 import sys
 import typing
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -76,7 +77,7 @@ def apply_overrides(values: dict[str, Any], overrides: list[str]) -> dict[str, A
     return result
 
 
-def load(cls: type[T], path: str | Path | None = None, overrides: list[str] = ()) -> T:
+def load(cls: type[T], path: str | Path | None = None, overrides: Sequence[str] = ()) -> T:
     """Config ``cls`` from its defaults, then the YAML file ``path``, then ``overrides``."""
     values: dict[str, Any] = as_dict(cls())
     where = "defaults"

@@ -140,7 +140,7 @@ def record_episode(env: CoverageEnv, policy, seed: int) -> Episode:  # noqa: ANN
     )
 
 
-def _pack(episodes: list[Episode]) -> dict[str, np.ndarray]:
+def _pack(episodes: list[Episode]) -> dict[str, Any]:
     """Ragged episodes as flat arrays with offsets."""
     nodes = np.cumsum([0] + [e.graph.num_nodes for e in episodes])
     steps = np.cumsum([0] + [e.num_steps for e in episodes])

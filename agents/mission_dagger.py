@@ -77,13 +77,13 @@ def record_mission(
         ValueError: an environment whose states the record cannot reproduce, naming the setting.
     """
     d = env.dynamics
-    for name, value, wanted in (
+    for name, value, needed in (
         ("retarget", d.retarget, "arrival"),
         ("observe", d.observe, "snapped"),
         ("visit_radius", d.visit_radius, None),
     ):
-        if value != wanted:
-            raise ValueError(f"record_mission needs dynamics.{name}={wanted!r}, got {value!r}")
+        if value != needed:
+            raise ValueError(f"record_mission needs dynamics.{name}={needed!r}, got {value!r}")
     if not 0.0 <= beta <= 1.0:
         raise ValueError(f"beta must be in [0, 1], got {beta}")
     rng = np.random.default_rng(seed)

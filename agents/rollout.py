@@ -137,12 +137,12 @@ class RolloutPolicy:
         for robots in groups:
             joints, owner = [], []
             for i in robots:
-                for move in np.flatnonzero(allowed[i]):
+                for move in np.flatnonzero(allowed[i]).tolist():
                     if move != chosen[i]:
                         joint = chosen.copy()
                         joint[i] = move
                         joints.append(joint)
-                        owner.append((i, int(move)))
+                        owner.append((i, move))
             if current is None:
                 joints.insert(0, chosen.copy())
             values = play_out(env, self.base, np.array(joints)) if joints else np.zeros(0)

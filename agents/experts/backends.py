@@ -6,6 +6,8 @@ fewer points than the optimum; it never returns an infeasible plan (checked by t
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from agents.experts.problem import UNREACHABLE, RoutingProblem
@@ -133,9 +135,8 @@ def solve_pyvrp(
         pyvrp.VehicleType(1, start_depot=i, end_depot=r, max_distance=int(problem.budget[i]))
         for i in range(r)
     ]
-    data = pyvrp.ProblemData(
-        locations, clients, depots, vehicles, [matrix], [np.zeros_like(matrix)]
-    )
+    matrices: list[Any] = [matrix, np.zeros_like(matrix)]  # pyvrp's stubs: ndarray[int, ...]
+    data = pyvrp.ProblemData(locations, clients, depots, vehicles, matrices[:1], matrices[1:])
     stop = MaxRuntime(time_limit) if max_iterations is None else MaxIterations(max_iterations)
     start = None
     if initial is not None and any(initial):

@@ -244,7 +244,9 @@ class RoutingExpert:
             replanned = True
             if self.mode == "open_loop" and self._expected is not None:
                 self.counts["replans"] += 1
-        goals = np.array([route[0] if route else -1 for route in self._routes], dtype=np.int64)
+        routes = self._routes
+        assert routes is not None  # planned above when there were none (_needs_replan)
+        goals = np.array([route[0] if route else -1 for route in routes], dtype=np.int64)
         fallback = np.flatnonzero(goals < 0)
         limit = np.inf if self.fallback_reach is None else self.fallback_reach
         goals[fallback] = greedy_goals(snapshot, fallback, limit)
@@ -282,9 +284,8 @@ class RoutingExpert:
         the share of the discovered waypoints that are points of interest); ``None``: 1 each."""
         if self.information != "expected":
             return None
-        share = np.count_nonzero(snapshot.interest & snapshot.discovered) / max(
-            np.count_nonzero(snapshot.discovered), 1
-        )
+        num_discovered = int(np.count_nonzero(snapshot.discovered))
+        share = np.count_nonzero(snapshot.interest & snapshot.discovered) / max(num_discovered, 1)
         return np.where(snapshot.discovered, 1.0, share)
 
     def act_env(self, env: Any) -> dict[str, int]:

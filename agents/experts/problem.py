@@ -91,10 +91,13 @@ def build_problem(
     Raises:
         ValueError: ``clock=False`` without a ``horizon``.
     """
-    if not clock and horizon is None:
-        raise ValueError("a plan blind to the clock (clock=False) needs a horizon")
     steps_left = snapshot.max_steps - snapshot.num_steps
-    limit = horizon if not clock else steps_left if horizon is None else min(horizon, steps_left)
+    if horizon is None:
+        if not clock:
+            raise ValueError("a plan blind to the clock (clock=False) needs a horizon")
+        limit = steps_left
+    else:
+        limit = min(horizon, steps_left) if clock else horizon
     robots = snapshot.robot_node
     budget = np.full(len(robots), limit, dtype=np.int64)
     graph = snapshot.graph

@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass, replace
-from typing import NamedTuple
+from typing import NamedTuple, cast
 
 import torch
 from torch import nn
@@ -42,7 +42,7 @@ from marl_cover.ego import NUM_ACTIONS, NUM_NODE_FEATURES
 try:  # optional (the ``fast`` extra): the receptive field's distances, compiled
     from agents.models._field_numba import capped_distances as _capped_distances
 except ImportError:
-    _capped_distances = None
+    _capped_distances = None  # type: ignore[assignment]
 
 KINDS = ("linear", "nonlinear")
 
@@ -112,22 +112,34 @@ def mlp(inputs: int, hidden: int, layers: int) -> nn.Sequential:
     return nn.Sequential(*modules)
 
 
+class _NodeWeights(NamedTuple):
+    """A node MLP's weights as :class:`_BlockWeights` holds them: its first layer split into
+    ``w_aggregate`` and ``w_self`` (transposed), its later layers as ``tail``."""
+
+    bias: torch.Tensor
+    w_aggregate: torch.Tensor
+    w_self: torch.Tensor
+    tail: tuple[tuple[torch.Tensor, torch.Tensor], ...]
+
+
 class _BlockWeights(NamedTuple):
     """One hop's MLP weights, transposed for ``addmm``: the edge MLP's first layer split into
     its edge part ``w_edge (H, H)`` and its receiver and sender parts ``w_node_parts`` (two
-    ``(H, H)``, untransposed; computed per node before the gather), the node MLP's into
-    ``w_aggregate`` and ``w_self``; each MLP's later layers as ``(bias, weight^T)`` pairs (a ReLU
-    before each). The node fields are empty after the last hop of a per-hop model. All are
-    views of the parameters, so in-place changes to them show through."""
+    ``(H, H)``, untransposed; computed per node before the gather), the node MLP's in ``node``
+    (``None`` after the last hop of a per-hop model); each MLP's later layers as
+    ``(bias, weight^T)`` pairs (a ReLU before each). All are views of the parameters, so
+    in-place changes to them show through."""
 
     edge_bias: torch.Tensor
     w_edge: torch.Tensor
     w_node_parts: tuple[torch.Tensor, torch.Tensor]
     edge_tail: tuple[tuple[torch.Tensor, torch.Tensor], ...]
-    node_bias: torch.Tensor | None
-    w_aggregate: torch.Tensor | None
-    w_self: torch.Tensor | None
-    node_tail: tuple[tuple[torch.Tensor, torch.Tensor], ...]
+    node: _NodeWeights | None
+
+
+def _first_linear(layers: nn.Sequential) -> nn.Linear:
+    """The first layer of an :func:`mlp`."""
+    return cast(nn.Linear, layers[0])
 
 
 def _tail_of(layers: nn.Sequential) -> tuple[tuple[torch.Tensor, torch.Tensor], ...]:
@@ -501,10 +513,13 @@ class AggregationGNN(nn.Module):
         node after the last hop with ``per_hop``)."""
         if not self.config.norm:
             return None, None
+        node_norm: nn.Module | None
         if not self.config.per_hop:
-            return self.edge_norms[0], self.node_norms[0]
-        node_norm = self.node_norms[hop] if hop < self.config.hops - 1 else None
-        return self.edge_norms[hop], node_norm
+            edge_norm, node_norm = self.edge_norms[0], self.node_norms[0]
+        else:
+            edge_norm = self.edge_norms[hop]
+            node_norm = self.node_norms[hop] if hop < self.config.hops - 1 else None
+        return cast(nn.LayerNorm, edge_norm), cast(nn.LayerNorm | None, node_norm)
 
     def blocks(self, hop: int) -> tuple[nn.Sequential, nn.Sequential | None]:
         """The non-linear model's edge and node MLPs at ``hop`` (no node MLP after the last hop
@@ -512,7 +527,7 @@ class AggregationGNN(nn.Module):
         if not self.config.per_hop:
             return self.edge_block, self.node_block
         node_block = self.node_blocks[hop] if hop < self.config.hops - 1 else None
-        return self.edge_blocks[hop], node_block
+        return cast(nn.Sequential, self.edge_blocks[hop]), cast(nn.Sequential | None, node_block)
 
     def forward(
         self,
@@ -576,7 +591,8 @@ class AggregationGNN(nn.Module):
         if torch.is_grad_enabled():
             return self._split_block_weights()
         blocks = self.edge_blocks if self.config.per_hop else [self.edge_block]
-        key = [block[0].weight.data_ptr() for block in blocks]  # the blocks' current tensors
+        # the blocks' current tensors
+        key = [_first_linear(cast(nn.Sequential, b)).weight.data_ptr() for b in blocks]
         cached = self.__dict__.get("_weights_cache")
         if cached is None or cached[0] != key:
             cached = self.__dict__["_weights_cache"] = (key, self._split_block_weights())
@@ -590,17 +606,21 @@ class AggregationGNN(nn.Module):
             edge_block, node_block = self.blocks(hop)
             key = (id(edge_block), id(node_block))
             if key not in prepared:
-                w_edge, w_receiver, w_sender = edge_block[0].weight.split(hidden, dim=1)
-                node = (None, None, None, ())
+                edge_first = _first_linear(edge_block)
+                w_edge, w_receiver, w_sender = edge_first.weight.split(hidden, dim=1)
+                node = None
                 if node_block is not None:
-                    w_aggregate, w_self = node_block[0].weight.split(hidden, dim=1)
-                    node = (node_block[0].bias, w_aggregate.t(), w_self.t(), _tail_of(node_block))
+                    node_first = _first_linear(node_block)
+                    w_aggregate, w_self = node_first.weight.split(hidden, dim=1)
+                    node = _NodeWeights(
+                        node_first.bias, w_aggregate.t(), w_self.t(), _tail_of(node_block)
+                    )
                 prepared[key] = _BlockWeights(
-                    edge_block[0].bias,
+                    edge_first.bias,
                     w_edge.t(),
                     (w_receiver, w_sender),
                     _tail_of(edge_block),
-                    *node,
+                    node,
                 )
             weights.append(prepared[key])
         return weights
@@ -660,9 +680,11 @@ class AggregationGNN(nn.Module):
             aggregate = mean_aggregate(
                 e_new, receivers[:num_edges], num_nodes, inverse_degree[:num_nodes]
             )
-            first = torch.addmm(block.node_bias, aggregate, block.w_aggregate)
+            node = block.node
+            assert node is not None  # only the last hop has no node MLP
+            first = torch.addmm(node.bias, aggregate, node.w_aggregate)
             h_self = h[:num_nodes]
-            h_new = _run_tail(block.node_tail, first.addmm_(h_self, block.w_self))
+            h_new = _run_tail(node.tail, first.addmm_(h_self, node.w_self))
             if node_norm is not None:
                 h_new = node_norm(h_new)
             h = h_new + h_self if self.config.residual else h_new

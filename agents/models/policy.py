@@ -261,7 +261,7 @@ class GNNPolicy:
     def logits(self, observations: dict[str, dict[str, np.ndarray]]) -> torch.Tensor:
         """Action logits ``(R, 5)`` (``-inf`` for masked actions) from per-agent ego-graphs."""
         agents = list(observations)
-        keys = GRAPH_KEYS[:-1]
+        keys: tuple[str, ...] = GRAPH_KEYS[:-1]
         if self.model.config.time_horizon is not None:
             keys = (*keys, "steps_left")
         batch = {

@@ -67,7 +67,7 @@ class StateValue(nn.Module):
     ) -> torch.Tensor:
         if (steps_left is None) != (self.horizon is None):
             raise ValueError("steps_left must be given exactly when the critic has a horizon")
-        if steps_left is not None:
+        if steps_left is not None and self.horizon is not None:
             nodes = with_time_feature(nodes, steps_left, self.horizon)
         lead, r = nodes.shape[:-2], self.num_robots
         batch = flat_batch(nodes, edge_index, edge_attr, edge_mask, node_mask)

@@ -268,15 +268,15 @@ def batch_loss(
     pushed toward the expert's tie-break between equally short paths. The metrics hold both,
     and the accuracy of the argmax against the label and against the set."""
     parts = [Part(batch, table, max_steps)] + ([] if extra is None else [extra])
-    logits, targets, accepts = [], [], []
+    logit_parts, targets, accepts = [], [], []
     for part in parts:
         nodes, edge_index, edge_attr, action_edges = collate_states(
             part.batch, part.table, model.config.time_horizon, part.max_steps
         )
-        logits.append(action_logits(model, (nodes, edge_index, edge_attr), action_edges))
+        logit_parts.append(action_logits(model, (nodes, edge_index, edge_attr), action_edges))
         targets.append(part.batch["action"].reshape(-1))
         accepts.append(part.batch["accept"].reshape(-1))
-    logits, target, accept = torch.cat(logits), torch.cat(targets), torch.cat(accepts)
+    logits, target, accept = torch.cat(logit_parts), torch.cat(targets), torch.cat(accepts)
     # robots without a label (-1: they did not decide at that state) do not count
     labelled = target >= 0  # (B*R,)
     if not bool(labelled.any()):
@@ -355,10 +355,11 @@ def dagger_round(
         positions, labels, accepted = [start.robot_node.copy()], [], []
         while env.agents:
             state = env.state()
-            if expert is None:
+            if teacher is not None:
                 label = teacher.act_state(state)
                 accepted.append(1 << label)
             else:
+                assert expert is not None  # made for every episode without a teacher
                 label = expert.act_snapshot(env.snapshot())
                 accepted.append(expert.accept.copy())
             learner = policy.act_state(state)
@@ -498,6 +499,7 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
         nonlocal table, own_table
         graphs = [e.graph for e in episodes]
         if apart:  # the roll-out env's graphs, padded to its largest map
+            assert own is not None  # dagger.env requires dagger.fraction (DaggerConfig)
             if own_table is None:
                 first, own_table = 0, GraphTable(graphs, rollout_env.max_waypoints)
             else:
@@ -515,7 +517,7 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
         )
 
     def next_batch() -> tuple[Any, Part | None]:
-        if not apart or len(own) == 0:
+        if not apart or own is None or own_table is None or len(own) == 0:
             return mixed_batch(buffer, own, config.batch_size, own_size), None
         extra = Part(own.sample(own_size), own_table, rollout_steps)
         return buffer.sample(config.batch_size - own_size), extra

@@ -395,7 +395,8 @@ def train_mappo(config: MAPPOConfig) -> dict[str, Any]:
     critic_gnn.to(device).train()
     actor = build_actor(actor_gnn, config, num_robots)
     anchor = None
-    if config.loss.anchor_coef > 0:  # the init file again: the same anchor when resuming
+    if config.loss.anchor_coef > 0 and config.init is not None:  # (the config requires init)
+        # the init file again: the same anchor when resuming
         anchor_gnn = load_model(config.init)[0].to(device).eval().requires_grad_(False)
         anchor = build_actor(anchor_gnn, config, num_robots)
     critic = build_critic(critic_gnn, config, num_robots, eval_env.config.max_steps)
@@ -415,7 +416,7 @@ def train_mappo(config: MAPPOConfig) -> dict[str, Any]:
     )
 
     c = config.collector
-    collector = None
+    collector: Any = None  # a TorchRL collector, while iterations are left
     if iteration < c.n_iters:
         seed = config.seed + 100_003 * iteration
         collector = _make_collector(config, actor, device, c.n_iters - iteration, seed)
@@ -424,7 +425,7 @@ def train_mappo(config: MAPPOConfig) -> dict[str, Any]:
         sampler=SamplerWithoutReplacement(),
         batch_size=config.optim.minibatch_size,
     )
-    log = make_logger(config.logger, out)
+    log = make_logger(config.logger or "none", out)  # (the config turns None into "none")
     progress = None
     if config.progress:
         from tqdm import tqdm

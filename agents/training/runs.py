@@ -87,7 +87,7 @@ def make_logger(kind: str, out: Path) -> Any:
 def command_line(
     argv: list[str],
     doc: str,
-    config_class: type,
+    config_class: type[Any],
     default_config: Path,
     train: Callable[[Any], dict[str, Any]],
 ) -> None:
