@@ -79,7 +79,9 @@ def animate(env_kwargs: dict[str, Any], policy: Any, seed: int, path: Path) -> N
         observations, *_ = env.step(policy.act(observations))
         frames.append(env.render())
     env.close()
-    images = [Image.fromarray(frame).convert("P", palette=Image.ADAPTIVE) for frame in frames]
+    images = [
+        Image.fromarray(frame).convert("P", palette=Image.Palette.ADAPTIVE) for frame in frames
+    ]
     path.parent.mkdir(parents=True, exist_ok=True)
     images[0].save(
         path, save_all=True, append_images=images[1:] + [images[-1]] * 10, duration=150, loop=0

@@ -174,7 +174,9 @@ def animate(config: MissionConfig, path: Path) -> None:
             trail_xy=history[max(0, k - trail) : k + 1],
         )
         ax.set_title(f"GNN, t = {time:5.1f} s, visited {int(visited.sum())}")
-        images.append(Image.fromarray(figure_to_array(fig)).convert("P", palette=Image.ADAPTIVE))
+        images.append(
+            Image.fromarray(figure_to_array(fig)).convert("P", palette=Image.Palette.ADAPTIVE)
+        )
     plt.close(fig)
     buffer = io.BytesIO()
     images[0].save(buffer, format="GIF", save_all=True, append_images=images[1:], duration=100)
