@@ -253,6 +253,8 @@ class MissionConfig:
             raise ValueError(f"mission frame_every must be > 0 seconds, got {self.frame_every}")
         if isinstance(self.dynamics, dict):
             self.dynamics = DynamicsConfig.from_dict(self.dynamics)
+        if "gnn" in self.methods and self.checkpoint and not Path(self.checkpoint).is_file():
+            raise FileNotFoundError(f"no model file at {self.checkpoint} (checkpoint)")
 
     def make_env(self) -> QuadrotorCoverageEnv:
         """The mission's environment; its ego-graphs span :meth:`observation_hops`."""

@@ -78,6 +78,8 @@ class RolloutLabelConfig:
             raise ValueError(f"beta must be in [0, 1], got {self.beta}")
         if "task" in self.env:
             raise ValueError("env.task: set the task with task=, not in env")
+        if self.checkpoint and not Path(self.checkpoint).is_file():
+            raise FileNotFoundError(f"no model file at {self.checkpoint} (checkpoint)")
 
     def model_path(self) -> Path:
         from agents.models.shipped import shipped_model_path

@@ -34,7 +34,10 @@ def main() -> None:
     )
     args = parser.parse_args()
     merge = merge_models if args.logits else average_models
-    model, metadata = merge(args.models)
+    try:
+        model, metadata = merge(args.models)
+    except (FileNotFoundError, ValueError) as error:
+        raise SystemExit(f"average_models: {error}") from error
     what = f"the {'members' if args.logits else 'mean'} of {len(args.models)}"
     save_model(args.out, model, metadata)
     config = model.config

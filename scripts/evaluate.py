@@ -133,6 +133,11 @@ def parse_overrides(
             raise SystemExit(str(error)) from error
     if options.task not in TASKS:
         raise SystemExit(f"unknown task {options.task!r}; tasks: {list(TASKS)}")
+    if options.episodes < 1 or options.seed < 0:
+        raise SystemExit(
+            f"episodes must be >= 1 and seed >= 0, got episodes={options.episodes} "
+            f"seed={options.seed}"
+        )
     env["task"] = options.task
     try:
         CoverageConfig(**env)  # names a bad environment value before anything runs
@@ -151,6 +156,11 @@ def parse_overrides(
         )
     if options.policy == "gnn_rollout" and "," in (options.checkpoint or ""):
         raise SystemExit("policy=gnn_rollout plays out one model, not an ensemble")
+    if options.policy == "gnn_rollout" and (not gnn.deterministic or gnn.centralized):
+        raise SystemExit(
+            "gnn.deterministic=false and gnn.centralized do not apply to policy=gnn_rollout "
+            "(it plays out the GNN's argmax on the whole state)"
+        )
     if expert.information != "full" and options.policy == "expert_local":
         raise SystemExit(
             "expert.information does not apply to policy=expert_local (it plans on what each "
@@ -236,7 +246,10 @@ def main(argv: list[str]) -> None:
     model, model_info = (
         load_gnn(options, env_overrides) if options.policy.startswith("gnn") else (None, None)
     )
-    env = parallel_env(**env_overrides)
+    try:
+        env = parallel_env(**env_overrides)
+    except (FileNotFoundError, ValueError) as error:  # e.g. a grid file that is not there
+        raise SystemExit(str(error)) from error
     policy = make_policy(options, expert, env.config.hops, gnn, model)
     seeds = range(options.seed, options.seed + options.episodes)
     try:

@@ -10,6 +10,8 @@ import marl_cover
 torch = pytest.importorskip("torch")
 pytest.importorskip("torchrl")
 
+from helpers import run_script  # noqa: E402
+
 from agents import configuration  # noqa: E402
 from agents.datasets import record_episode, write_shard  # noqa: E402
 from agents.greedy import CentralizedGreedyPolicy  # noqa: E402
@@ -165,6 +167,11 @@ def test_model_files_round_trip_and_bad_files_are_named(tmp_path) -> None:
         load_model(tmp_path / "bad.pt")
     with pytest.raises(FileNotFoundError, match="missing.pt"):
         load_model(tmp_path / "missing.pt")
+    (tmp_path / "empty.pt").write_bytes(b"")
+    (tmp_path / "notes.pt").write_text("# notes\n")
+    for name, error in (("empty.pt", "EOFError"), ("notes.pt", "UnpicklingError")):
+        with pytest.raises(ValueError, match=rf"{name} is not a model file \({error}: "):
+            load_model(tmp_path / name)
 
 
 def test_averaged_models_hold_the_mean_weights(tmp_path) -> None:
@@ -189,6 +196,10 @@ def test_averaged_models_hold_the_mean_weights(tmp_path) -> None:
         average_models([paths[0], tmp_path / "wide.pt"])
     with pytest.raises(ValueError, match="at least two model files"):
         average_models(paths[:1])
+    refused = run_script("average_models.py", str(tmp_path / "out.pt"), str(paths[0]))
+    assert refused.returncode != 0 and "Traceback" not in refused.stderr
+    assert "average_models: averaging needs at least two model files, got 1" in refused.stderr
+    assert not (tmp_path / "out.pt").exists()
 
 
 def test_configs_reject_unknown_keys_and_read_sections(tmp_path) -> None:

@@ -108,10 +108,16 @@ def test_cli_rejects_unknown_keys() -> None:
         ("num_robots=x", "CoverageConfig.num_robots must be an integer, got 'x'"),
         ("window_fraction=3", "window_fraction must be in (0, 1], got 3"),
         ("gnn.temperature=0.5", "needs gnn.deterministic=false"),
+        ("episodes=0", "episodes must be >= 1 and seed >= 0, got episodes=0 seed=0"),
+        ("seed=-3", "episodes must be >= 1 and seed >= 0, got episodes=100 seed=-3"),
+        ("map=missing_grid.npy", "occupancy grid not found: missing_grid.npy"),
+        ("checkpoint=README.md policy=gnn", "README.md is not a model file (UnpicklingError"),
+        ("checkpoint=missing.pt policy=gnn", "no model file at missing.pt"),
+        ("policy=gnn_rollout gnn.deterministic=false", "do not apply to policy=gnn_rollout"),
     ],
 )
 def test_cli_names_bad_values(argument: str, message: str) -> None:
-    result = run_cli(argument)
+    result = run_cli(*argument.split())
     assert result.returncode != 0 and message in result.stderr
     assert "Traceback" not in result.stderr
 

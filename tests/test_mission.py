@@ -101,6 +101,11 @@ def test_mission_config_rejects_unknown_methods_and_keys() -> None:
             load(MissionConfig, None, [f"{key}={value}"])
     with pytest.raises(ValueError, match="frame_every must be > 0"):
         MissionConfig(frame_every=0.0)
+    with pytest.raises(FileNotFoundError, match=r"no model file at nowhere.pt \(checkpoint\)"):
+        load(MissionConfig, None, ["checkpoint=nowhere.pt"])
+    assert load(MissionConfig, None, ["checkpoint=nowhere.pt", "methods=[greedy]"]).methods == [
+        "greedy"
+    ]  # a model file only matters to the GNN
 
 
 def test_ego_graphs_span_the_gnn_receptive_field(tmp_path: Path) -> None:

@@ -228,3 +228,5 @@ def test_own_labels_are_the_learners_moves() -> None:
     assert counts["changed"] == 0
     with pytest.raises(ValueError, match="labels must be 'rollout' or 'own'"):
         RolloutLabelConfig(labels="expert")
+    with pytest.raises(FileNotFoundError, match=r"no model file at nowhere.pt \(checkpoint\)"):
+        RolloutLabelConfig(checkpoint="nowhere.pt")

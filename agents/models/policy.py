@@ -16,6 +16,7 @@
 from __future__ import annotations
 
 import io
+import pickle
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
@@ -362,7 +363,10 @@ def load_model(path: str | Path) -> tuple[AggregationGNN, dict[str, Any]]:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"no model file at {path}")
-    record = torch.load(path, map_location="cpu", weights_only=False)
+    try:
+        record = torch.load(path, map_location="cpu", weights_only=False)
+    except (pickle.UnpicklingError, EOFError, RuntimeError) as error:  # not a torch file
+        raise ValueError(f"{path} is not a model file ({type(error).__name__}: {error})") from None
     for key in ("gnn_config", "state_dict"):
         if not isinstance(record, dict) or key not in record:
             raise ValueError(f"{path} is not a model file (no {key!r} entry)")
