@@ -178,6 +178,7 @@ class MissionDaggerConfig:
                 raise ValueError(f"{name} must be >= 1, got {value}")
         if not 0.0 <= self.beta <= 1.0:
             raise ValueError(f"beta must be in [0, 1], got {self.beta}")
+        self.mission()  # names a bad mission setting (a missing checkpoint) on loading
 
     def mission(self) -> MissionConfig:
         """The mission these records fly (the learner as its GNN)."""

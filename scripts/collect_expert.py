@@ -24,6 +24,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from agents.cli import parse_value  # noqa: E402
 from agents.datasets import SHARD_PATTERN, record_episode, write_shard  # noqa: E402
 from marl_cover import CoverageConfig, parallel_env  # noqa: E402
+from marl_cover.config import check_field_types  # noqa: E402
 
 
 @dataclass
@@ -60,7 +61,40 @@ def parse(argv: list[str]) -> tuple[CollectOptions, dict[str, Any]]:
             env[key] = text if key == "map" else parse_value(text)
         else:
             raise SystemExit(f"unknown key {key!r}; keys: {sorted(names | env_keys)}")
+    check(options, env)
     return options, env
+
+
+def check(options: CollectOptions, env: dict[str, Any]) -> None:
+    """Names a bad setting before anything is written.
+
+    Raises:
+        SystemExit: a value of the wrong type or out of range, or a bad environment key.
+    """
+    from agents.experts import MODES
+    from agents.experts.backends import BACKENDS
+
+    problems = []
+    try:
+        check_field_types(options)
+        CoverageConfig(**env)
+    except (TypeError, ValueError) as error:
+        raise SystemExit(f"collect_expert: {error}") from error
+    for name in ("episodes", "shard_size", "workers"):
+        if getattr(options, name) < 1:
+            problems.append(f"{name} must be >= 1, got {getattr(options, name)}")
+    if options.seed < 0 or options.iterations < 0:
+        problems.append(
+            f"seed and iterations must be >= 0, got {options.seed}, {options.iterations}"
+        )
+    if not options.time_limit > 0:
+        problems.append(f"expert.time_limit must be > 0 seconds, got {options.time_limit}")
+    if options.mode not in MODES:
+        problems.append(f"expert.mode must be one of {MODES}, got {options.mode!r}")
+    if options.backend not in BACKENDS:
+        problems.append(f"expert.backend must be one of {BACKENDS}, got {options.backend!r}")
+    if problems:
+        raise SystemExit("collect_expert: " + "; ".join(problems))
 
 
 def collect_shard(job: tuple[int, list[int], dict, dict]) -> tuple[int, int, float]:

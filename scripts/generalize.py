@@ -94,8 +94,11 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(1)
     args.checkpoint = args.checkpoint or shipped_model_path(args.task)
+    try:
+        model, _ = load_model(args.checkpoint)
+    except (FileNotFoundError, ValueError) as error:
+        parser.error(str(error))
     args.model_sha256 = file_sha256(args.checkpoint)  # names the model in each result's setup
-    model, _ = load_model(args.checkpoint)
     if not args.table_only:
         for robots in args.robots:
             for method in args.methods:

@@ -19,6 +19,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from agents import configuration  # noqa: E402
 from agents.cli import positive_int  # noqa: E402
+from agents.models.gnn import KINDS  # noqa: E402
 from agents.training.bc import BCConfig, train_bc  # noqa: E402
 
 DEFAULT_CONFIG = Path(__file__).resolve().parent.parent / "configs" / "bc_coverage.yaml"
@@ -26,7 +27,7 @@ DEFAULT_CONFIG = Path(__file__).resolve().parent.parent / "configs" / "bc_covera
 
 def main(argv: list[str]) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--kinds", nargs="+", default=["linear", "nonlinear"])
+    parser.add_argument("--kinds", nargs="+", default=["linear", "nonlinear"], choices=KINDS)
     parser.add_argument("--hops", nargs="+", type=positive_int, default=list(range(3, 20, 2)))
     parser.add_argument("--config", default=str(DEFAULT_CONFIG))
     parser.add_argument("--out", type=Path, default=Path("outputs/bc"))
@@ -38,7 +39,7 @@ def main(argv: list[str]) -> None:
             if (out / "model.pt").exists():
                 continue
             overrides = [*args.overrides, f"model.kind={kind}", f"model.hops={hops}", f"out={out}"]
-            config = configuration.load(BCConfig, args.config, overrides)
+            config = configuration.load_or_exit(BCConfig, args.config, overrides)
             summary = train_bc(config)
             print(f"{kind} K={hops}: {summary}", flush=True)
 

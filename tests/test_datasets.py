@@ -255,3 +255,24 @@ def test_label_agreement_script(tmp_path) -> None:
     assert shards["dataset"] == str(data) and shards["receding"] == 6
     assert shards["total"] == 3 * 4 and shards["in_set"] == shards["agreed"]
     assert shards["tied"] == 0 and "in set" in done.stdout
+
+
+@pytest.mark.parametrize(
+    ("argument", "message"),
+    [
+        ("episodes=0", "collect_expert: episodes must be >= 1, got 0"),
+        ("workers=0", "collect_expert: workers must be >= 1, got 0"),
+        (
+            "expert.mode=closed",
+            "expert.mode must be one of ('open_loop', 'receding'), got 'closed'",
+        ),
+        ("expert.backend=gurobi", "expert.backend must be one of ('pyvrp', 'ortools')"),
+        ("expert.time_limit=0", "expert.time_limit must be > 0 seconds, got 0"),
+        ("seed=x", "CollectOptions.seed must be an integer, got 'x'"),
+        ("num_robots=0", "num_robots must be >= 1, got 0"),
+    ],
+)
+def test_collection_names_bad_settings_before_writing(tmp_path, argument, message) -> None:
+    result = run_script("collect_expert.py", f"out={tmp_path / 'data'}", argument)
+    assert result.returncode != 0 and message in result.stderr
+    assert "Traceback" not in result.stderr and not (tmp_path / "data").exists()

@@ -354,3 +354,10 @@ def test_compare_script_prints_and_writes_the_table(tmp_path: Path) -> None:
     assert json.loads(out.read_text())[0]["difference"] == 2.0
     bad = run_script("compare.py", str(base), str(tmp_path / "missing.csv"))
     assert bad.returncode == 1 and "missing.csv" in bad.stderr
+
+
+def test_generalize_names_a_bad_model_file() -> None:
+    for path, message in (("no.pt", "no model file at no.pt"), ("README.md", "not a model file")):
+        result = run_script("generalize.py", "--checkpoint", path, "--robots", "10")
+        assert result.returncode != 0 and message in result.stderr
+        assert "Traceback" not in result.stderr

@@ -138,3 +138,8 @@ def test_collect_script_writes_resumable_shards(tmp_path: Path) -> None:
     other = run_script("collect_mission_dagger.py", *args, "missions=3", "beta=0.9")
     assert other.returncode != 0 and "beta" in other.stderr
     assert MissionDaggerConfig(missions=1).mission().methods == ["gnn"]
+    missing = run_script(
+        "collect_mission_dagger.py", f"out={tmp_path / 'none'}", "checkpoint=no.pt"
+    )
+    assert missing.returncode != 0 and "Traceback" not in missing.stderr
+    assert "collect_mission_dagger: no model file at no.pt (checkpoint)" in missing.stderr
