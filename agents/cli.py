@@ -1,18 +1,32 @@
 """Helpers shared by the scripts and training loops: ``key=value`` values, argparse types for
-counts and seeds, atomic writes, and results that are read back on resume only when they were
-made under the same setup."""
+counts and seeds, atomic writes, progress bars, and results that are read back on resume only
+when they were made under the same setup."""
 
 from __future__ import annotations
 
 import argparse
+import functools
 import hashlib
 import json
 import math
 import os
+import sys
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
+
+
+def progress_bar(
+    desc: str, unit: str = "episode", leave: bool = True
+) -> Callable[[Iterable[Any]], Iterable[Any]] | None:
+    """A wrapper that shows an iteration's progress on stderr (tqdm), or ``None`` when tqdm is
+    not installed (the ``dev`` and ``train`` extras have it)."""
+    try:
+        from tqdm import tqdm
+    except ImportError:
+        return None
+    return functools.partial(tqdm, desc=desc, unit=unit, file=sys.stderr, leave=leave)
 
 
 def parse_value(text: str) -> Any:

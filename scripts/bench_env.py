@@ -23,6 +23,7 @@ import sys
 import time
 import tracemalloc
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -49,7 +50,7 @@ CASES = {
     },
 }
 TARGETS = {"a": 5000.0, "b": 100.0, "d": 2000.0, "f": 3000.0, "g": 60.0}
-COLLECTION = {"map": "paper", "num_robots": 4, "hops": 19}
+COLLECTION: dict[str, Any] = {"map": "paper", "num_robots": 4, "hops": 19}
 
 
 def observation_bytes(observations: dict) -> int:
@@ -100,9 +101,9 @@ def bench_collector(env, frames_per_batch: int, seconds: float) -> dict:  # noqa
     collector = Collector(
         env, None, frames_per_batch=frames_per_batch, total_frames=-1, return_same_td=True
     )
-    frames, start = 0, None
-    for batch in collector:
-        if start is None:
+    frames, start = 0, 0.0
+    for k, batch in enumerate(collector):
+        if k == 0:  # the first batch warms up; the clock starts after it
             start = time.perf_counter()
             continue
         frames += batch.numel()

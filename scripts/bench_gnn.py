@@ -50,7 +50,8 @@ def record_states(env_kwargs: dict, steps: int) -> list[tuple[dict, dict]]:
     """(stacked ego-observations, state) pairs along random-action episodes."""
     env = parallel_env(**env_kwargs)
     rng = np.random.default_rng(0)
-    pairs, seed = [], 0
+    pairs: list[tuple[dict[str, np.ndarray], dict[str, np.ndarray]]] = []
+    seed = 0
     env.reset(seed=seed)
     while len(pairs) < steps:
         if not env.agents:

@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 import sys
 import time
+from collections.abc import Iterable
 from dataclasses import asdict, dataclass, fields
 from multiprocessing import get_context
 from pathlib import Path
@@ -158,6 +159,7 @@ def main(argv: list[str]) -> None:
         tqdm(total=sum(len(j[1]) for j in jobs), unit="episode", file=sys.stderr) if tqdm else None
     )
     start = time.perf_counter()
+    results: Iterable[tuple[int, int, float]]
     if options.workers <= 1:
         results = map(collect_shard, jobs)
     else:

@@ -20,6 +20,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from agents.cli import non_negative_int, positive_int  # noqa: E402
@@ -80,7 +82,8 @@ def animate(env_kwargs: dict[str, Any], policy: Any, seed: int, path: Path) -> N
         frames.append(env.render())
     env.close()
     images = [
-        Image.fromarray(frame).convert("P", palette=Image.Palette.ADAPTIVE) for frame in frames
+        Image.fromarray(np.asarray(frame)).convert("P", palette=Image.Palette.ADAPTIVE)
+        for frame in frames  # (H, W, 3) uint8 images in rgb_array mode
     ]
     path.parent.mkdir(parents=True, exist_ok=True)
     images[0].save(

@@ -50,7 +50,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from agents.cli import parse_value, write_text_atomic  # noqa: E402
+from agents.cli import parse_value, progress_bar, write_text_atomic  # noqa: E402
 from agents.evaluation import evaluate  # noqa: E402
 from marl_cover import CoverageConfig, parallel_env  # noqa: E402
 from marl_cover.config import TASKS, check_field_types  # noqa: E402
@@ -98,8 +98,9 @@ def parse_overrides(
     Raises:
         SystemExit: a malformed argument or an unknown key, naming it.
     """
-    options, expert, gnn, env = EvaluateOptions(), ExpertOptions(), GNNOptions(), {}
-    sections = {"expert": expert, "gnn": gnn}
+    options, expert, gnn = EvaluateOptions(), ExpertOptions(), GNNOptions()
+    env: dict[str, Any] = {}
+    sections: dict[str, Any] = {"expert": expert, "gnn": gnn}
     env_keys = {f.name for f in fields(CoverageConfig)} - {"graph", "render_mode"}
     for arg in argv:
         if "=" not in arg:
@@ -184,6 +185,7 @@ def load_gnn(options: EvaluateOptions, env_overrides: dict[str, Any]) -> tuple[A
         loaded = [load_model(part) for part in parts]
     except (FileNotFoundError, ValueError) as error:
         raise SystemExit(str(error)) from error
+    model: Any
     (model, metadata), hops = loaded[0], max(m.config.hops for m, _ in loaded)
     if len(parts) > 1:
         model, metadata = [m for m, _ in loaded], {"ensemble": parts}
@@ -217,11 +219,11 @@ def make_policy(
     if options.policy in ("greedy", "greedy_central"):
         from agents.greedy import CentralizedGreedyPolicy, GreedyPolicy
 
-        cls = GreedyPolicy if options.policy == "greedy" else CentralizedGreedyPolicy
-        return cls(hops, fallback=options.fallback)
+        greedy = GreedyPolicy if options.policy == "greedy" else CentralizedGreedyPolicy
+        return greedy(hops, fallback=options.fallback)
     from agents.experts import LocalRoutingExpert, RoutingExpert
 
-    common = {
+    common: dict[str, Any] = {
         "backend": expert.backend,
         "time_limit": expert.time_limit,
         "seed": expert.seed,
@@ -252,14 +254,7 @@ def main(argv: list[str]) -> None:
         raise SystemExit(str(error)) from error
     policy = make_policy(options, expert, env.config.hops, gnn, model)
     seeds = range(options.seed, options.seed + options.episodes)
-    try:
-        from tqdm import tqdm
-
-        def progress(it):  # noqa: ANN001, ANN202
-            return tqdm(it, desc=options.policy, unit="episode", file=sys.stderr)
-    except ImportError:
-        progress = None
-    summary = evaluate(env, policy, seeds, progress=progress)
+    summary = evaluate(env, policy, seeds, progress=progress_bar(options.policy))
     record = {
         "options": asdict(options),
         "expert": asdict(expert) if options.policy.startswith("expert") else None,

@@ -18,6 +18,7 @@ import argparse
 import json
 import sys
 from pathlib import Path
+from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
@@ -49,6 +50,7 @@ def run(method: str, robots: int, args: argparse.Namespace, model) -> dict:  # n
     env = parallel_env(
         map="paper_large", num_robots=robots, hops=hops, max_steps=50, task=args.task
     )
+    policy: Any
     if method == "gnn":
         from agents.models.policy import GNNPolicy
 

@@ -141,7 +141,7 @@ def plot(config: MissionConfig, results: dict[str, list[dict]], path: Path) -> N
     plt.close(fig)
 
 
-def animate(config: MissionConfig, path: Path) -> None:
+def animate(config: MissionConfig, seed: int, path: Path) -> None:
     """One GNN mission as a GIF (robots at their true positions, 20 s trails)."""
     import io
 
@@ -155,7 +155,7 @@ def animate(config: MissionConfig, path: Path) -> None:
 
     env = config.make_env()
     result: MissionResult = run_mission(
-        env, make_mission_policy("gnn", config), config.animate_seed, config.frame_every
+        env, make_mission_policy("gnn", config), seed, config.frame_every
     )
     snapshot = env.snapshot()
     fig, ax = plt.subplots(figsize=(6, 6), dpi=80)
@@ -198,7 +198,7 @@ def main() -> None:
     write_text_atomic(out / "mission.json", json.dumps(summary, indent=1))
     plot(config, results, out / "mission.png")
     if config.animate_seed is not None and "gnn" in config.methods:
-        animate(config, out / "mission_gnn.gif")
+        animate(config, config.animate_seed, out / "mission_gnn.gif")
     print(
         f"\nwrote {out}/mission.json, mission.png"
         + (", mission_gnn.gif" if config.animate_seed is not None else "")

@@ -27,7 +27,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from agents.averaging import load_window, select_window  # noqa: E402
-from agents.cli import positive_int, write_text_atomic  # noqa: E402
+from agents.cli import positive_int, progress_bar, write_text_atomic  # noqa: E402
 from marl_cover.config import TASKS  # noqa: E402
 
 
@@ -50,13 +50,7 @@ def main(argv: list[str] | None = None) -> None:
     if args.max_steps is not None:
         env_kwargs["max_steps"] = args.max_steps
     seeds = list(range(args.seed, args.seed + args.episodes))
-    try:
-        from tqdm import tqdm
-
-        def progress(it):  # noqa: ANN001, ANN202
-            return tqdm(it, desc="episodes", unit="episode", file=sys.stderr, leave=False)
-    except ImportError:
-        progress = None
+    progress = progress_bar("episodes", leave=False)
     try:
         results, best = select_window(
             args.run, args.sizes, env_kwargs, seeds, out / "windows", progress

@@ -1,6 +1,6 @@
-"""The packages type-check (``[tool.mypy]`` in pyproject.toml: ``marl_cover``, which ships
-``py.typed``, so the annotations users' type checkers read are the ones the code obeys, and
-``agents``)."""
+"""The code type-checks (``[tool.mypy]`` in pyproject.toml: ``marl_cover``, which ships
+``py.typed``, so the annotations users' type checkers read are the ones the code obeys,
+``agents`` and ``scripts``)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def test_packages_type_check(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_code_type_checks(monkeypatch: pytest.MonkeyPatch) -> None:
     api = pytest.importorskip("mypy.api")
     monkeypatch.chdir(ROOT)  # the pyproject's [tool.mypy] section and its cache
     stdout, stderr, status = api.run(["--config-file", "pyproject.toml"])
