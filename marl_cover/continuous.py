@@ -239,6 +239,10 @@ class QuadrotorCoverageEnv(CoverageEnv):
             )
         if isinstance(dynamics, dict):
             dynamics = DynamicsConfig.from_dict(dynamics)
+        if not isinstance(dynamics, DynamicsConfig | None):
+            raise TypeError(
+                f"dynamics must be a DynamicsConfig or a dict of its fields, got {dynamics!r}"
+            )
         self.dynamics = dynamics or DynamicsConfig()
         self._kernels = compiled_kernels(self.dynamics.backend)  # None: numpy
         self._locator: WaypointLocator | None = None

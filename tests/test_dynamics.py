@@ -122,6 +122,8 @@ def test_bad_parameters_are_named() -> None:
     with pytest.raises(TypeError, match=r"DynamicsConfig.altitude_range must be tuple"):
         DynamicsConfig(altitude_range=(3.0, "high"))
     assert DynamicsConfig(altitude_range=[3, 8], max_time=400).altitude_range == (3.0, 8.0)
+    with pytest.raises(TypeError, match="dynamics must be a DynamicsConfig or a dict.*'fast'"):
+        marl_cover.quadrotor_parallel_env(map="city", dynamics="fast")
 
 
 # ---------------------------------------------------------------------- snapping
