@@ -26,6 +26,7 @@ bench: $(STAMP)
 
 lint: $(STAMP)
 	$(PY) -m ruff check marl_cover agents scripts tests
+	$(PY) -m ruff format --check marl_cover agents scripts tests
 	$(PY) -m mypy
 
 clean:

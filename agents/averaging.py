@@ -52,10 +52,12 @@ class WindowResult:
 
     @property
     def mean(self) -> float:
+        """Mean reward over the seeds."""
         return float(np.mean(self.rewards))
 
     @property
     def sem(self) -> float:
+        """Standard error of the mean reward over the seeds."""
         return float(np.std(self.rewards, ddof=1) / np.sqrt(len(self.rewards)))
 
     def paired(self, other: WindowResult) -> tuple[float, float]:

@@ -71,6 +71,7 @@ class Episode:
 
     @property
     def num_steps(self) -> int:
+        """Actions recorded (the episode's steps)."""
         return int(self.actions.shape[0])
 
     def visited(self, step: int) -> np.ndarray:

@@ -25,7 +25,8 @@ class Policy(Protocol):
     (centralized); one with ``reset(seed)`` is reset with the episode's seed.
     """
 
-    def act(self, observations: dict[str, Any]) -> dict[str, int]: ...
+    def act(self, observations: dict[str, Any]) -> dict[str, int]:
+        """One action per live agent from their observations."""
 
 
 def decide(policy: Any, observations: dict[str, Any], env: CoverageEnv) -> dict[str, int]:

@@ -37,7 +37,8 @@ class BasePolicy(Protocol):
     """A centralized policy over a batch of states: ``(B, R)`` integer actions for ``B``
     ``state()`` dictionaries (every state of one environment configuration)."""
 
-    def __call__(self, states: list[dict[str, np.ndarray]]) -> np.ndarray: ...
+    def __call__(self, states: list[dict[str, np.ndarray]]) -> np.ndarray:
+        """Actions ``(B, R)`` for the ``B`` states."""
 
 
 class GNNArgmax:
@@ -52,6 +53,7 @@ class GNNArgmax:
         self._dtype = next(model.parameters()).dtype
 
     def __call__(self, states: list[dict[str, np.ndarray]]) -> np.ndarray:
+        """Each robot's argmax action ``(B, R)`` in each of the ``B`` states."""
         import torch
 
         from agents.models.gnn import batched_state_logits
@@ -122,6 +124,7 @@ class RolloutPolicy:
         self.counts: Counter[str] = Counter()
 
     def reset(self, seed: int | None = None) -> None:  # noqa: ARG002 (the harness's hook)
+        """Starts an episode: zeroes the counts (the evaluation harness's hook)."""
         self.counts = Counter()
 
     def improve(self, env: CoverageEnv) -> np.ndarray:

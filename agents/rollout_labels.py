@@ -82,6 +82,7 @@ class RolloutLabelConfig:
             raise FileNotFoundError(f"no model file at {self.checkpoint} (checkpoint)")
 
     def model_path(self) -> Path:
+        """The learner's model file: ``checkpoint``, or the task's shipped model."""
         from agents.models.shipped import shipped_model_path
 
         return Path(self.checkpoint) if self.checkpoint else shipped_model_path(self.task)

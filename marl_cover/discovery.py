@@ -122,14 +122,17 @@ class Discovery:
 
     @property
     def order(self) -> np.ndarray:
+        """``(num_discovered,)`` the discovered waypoints in discovery order (class docstring)."""
         return self._order[: self.num_discovered]
 
     @property
     def edge_index(self) -> np.ndarray:
+        """``(2, num_known_edges)`` known directed edges in ranks, in the order they were found."""
         return self._edges[:, : self.num_known_edges]
 
     @property
     def edge_length(self) -> np.ndarray:
+        """``(num_known_edges,)`` float32, the known edges' lengths in cells."""
         return self._lengths[: self.num_known_edges]
 
     def sense(self, robot_node: np.ndarray) -> np.ndarray:

@@ -60,6 +60,7 @@ class FixedMap(MapSource):
         self.fixed = True
 
     def sample(self, rng: np.random.Generator) -> SpatialGraph:
+        """The same graph every episode."""
         return self.graph
 
 
@@ -83,6 +84,7 @@ class WindowMap(MapSource):
         self.fixed = False
 
     def sample(self, rng: np.random.Generator) -> SpatialGraph:
+        """A random window of the graph, drawn with ``rng``."""
         return sample_window(self.graph, rng, self.fraction, self.min_nodes)
 
 
@@ -99,6 +101,7 @@ class CityMap(MapSource):
         self.fixed = False
 
     def sample(self, rng: np.random.Generator) -> SpatialGraph:
+        """A new city drawn with ``rng``."""
         return generate_city(rng, self.config)
 
 

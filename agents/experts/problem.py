@@ -50,10 +50,12 @@ class RoutingProblem:
 
     @property
     def num_robots(self) -> int:
+        """Robots (routes) of the problem."""
         return len(self.robot_node)
 
     @property
     def num_candidates(self) -> int:
+        """Candidate stops (points of interest within reach)."""
         return len(self.candidates)
 
     def route_length(self, robot: int, stops: list[int]) -> int:

@@ -65,6 +65,7 @@ class StateLogits(nn.Module):
         action_mask: torch.Tensor,
         steps_left: torch.Tensor | None = None,
     ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Logits and mask ``(..., R, 5)`` of padded states ``(..., M, *)`` (class docstring)."""
         lead, r = nodes.shape[:-2], self.num_robots
         batch = flat_batch(nodes, edge_index, edge_attr, edge_mask, node_mask)
         if steps_left is not None:  # (*lead,): read when the network has a time_horizon
@@ -91,6 +92,7 @@ class EgoGraphLogits(StateLogits):
         action_mask: torch.Tensor,
         steps_left: torch.Tensor | None = None,
     ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Logits and mask ``(..., 5)`` of padded ego-graphs ``(..., M, *)``."""
         logits, mask = super().forward(
             nodes, edge_index, edge_attr, edge_mask, None, action_mask.unsqueeze(-2), steps_left
         )
@@ -129,6 +131,7 @@ class Tempered(nn.Module):
         self.temperature = temperature
 
     def forward(self, *inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The wrapped module's logits divided by the temperature, and its mask."""
         logits, mask = self.module(*inputs)
         return logits / self.temperature, mask
 
@@ -249,6 +252,7 @@ class GNNPolicy:
             self.act_state = self._act_state
 
     def reset(self, seed: int | None = None) -> None:
+        """Reseeds the sampling generator for an episode (``None``: keeps it)."""
         if seed is not None:
             self._generator.manual_seed(seed)
 
@@ -320,9 +324,11 @@ class EnsemblePolicy(GNNPolicy):
         self.members = [GNNPolicy(model) for model in models]
 
     def logits(self, observations: dict[str, dict[str, np.ndarray]]) -> torch.Tensor:
+        """The members' pooled logits ``(R, 5)`` from per-agent ego-graphs."""
         return _pooled([member.logits(observations) for member in self.members])
 
     def state_logits(self, state: dict[str, np.ndarray]) -> torch.Tensor:
+        """The members' pooled logits ``(R, 5)`` from one ``state()``."""
         return _pooled([member.state_logits(state) for member in self.members])
 
 

@@ -65,6 +65,7 @@ class StateValue(nn.Module):
         node_mask: torch.Tensor,
         steps_left: torch.Tensor | None = None,
     ) -> torch.Tensor:
+        """Value ``(..., R, 1)`` of every robot from padded states ``(..., M, *)``."""
         if (steps_left is None) != (self.horizon is None):
             raise ValueError("steps_left must be given exactly when the critic has a horizon")
         if steps_left is not None and self.horizon is not None:
@@ -96,5 +97,6 @@ class EgoValue(StateValue):
         node_mask: torch.Tensor,
         steps_left: torch.Tensor | None = None,
     ) -> torch.Tensor:
+        """Value ``(..., 1)`` of each ego robot from its padded ego-graph ``(..., M, *)``."""
         values = super().forward(nodes, edge_index, edge_attr, edge_mask, node_mask, steps_left)
         return values.squeeze(-2)

@@ -199,6 +199,7 @@ class BCConfig:
 
     @property
     def total_steps(self) -> int:
+        """Batches of the whole run: the cloning steps plus every DAgger round's."""
         return self.steps + self.dagger.rounds * self.dagger.steps
 
 

@@ -1,0 +1,40 @@
+"""Static checks of the code, so that CI holds them and not only ``make lint``.
+
+- mypy (``[tool.mypy]`` in pyproject.toml): ``marl_cover``, which ships ``py.typed``, so the
+  annotations users' type checkers read are the ones the code obeys, ``agents`` and
+  ``scripts``.
+- ruff (``[tool.ruff]``): the lint rules, docstrings on every public module, class, method and
+  function of the packages, and the formatting.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+CODE = ["marl_cover", "agents", "scripts", "tests"]
+
+
+def test_code_type_checks(monkeypatch: pytest.MonkeyPatch) -> None:
+    api = pytest.importorskip("mypy.api")
+    monkeypatch.chdir(ROOT)  # the pyproject's [tool.mypy] section and its cache
+    stdout, stderr, status = api.run(["--config-file", "pyproject.toml"])
+    assert status == 0, stdout + stderr
+    assert "Success: no issues found" in stdout
+
+
+@pytest.mark.parametrize("command", [["check"], ["format", "--check"]])
+def test_code_passes_ruff(command: list[str]) -> None:
+    pytest.importorskip("ruff")
+    result = subprocess.run(
+        [sys.executable, "-m", "ruff", *command, *CODE],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert result.returncode == 0, result.stdout + result.stderr
