@@ -522,7 +522,7 @@ class CoverageEnv(ParallelEnv):
     def _observe(self) -> dict[str, dict[str, np.ndarray]]:
         batch = self.observe_batch()
         return {
-            agent: {key: value[i] for key, value in batch.items()}
+            agent: {key: value[i, ...] for key, value in batch.items()}  # steps_left: 0-d
             for i, agent in enumerate(self.possible_agents)
         }
 

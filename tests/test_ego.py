@@ -71,6 +71,10 @@ def test_ego_graph_is_the_induced_k_hop_ball(seed: int) -> None:
             # edges are stored once per direction
             assert obs[agent]["edge_mask"].sum() == 2 * expected.number_of_edges()
             assert env.observation_space(agent).contains(obs[agent])
+            # every entry is an array of its space's shape (no numpy scalars to cast)
+            for key, value in obs[agent].items():
+                assert isinstance(value, np.ndarray), key
+                assert value.shape == env.observation_space(agent)[key].shape, key
         obs, *_ = env.step({a: int(rng.integers(NUM_ACTIONS)) for a in env.agents})
 
 
