@@ -84,12 +84,19 @@ class SpatialGraph:
             cell_size: Lattice spacing in metres.
 
         Raises:
-            ValueError: An edge is a self-loop, is listed twice, or two neighbours of one node
-                fall into the same direction slot.
+            ValueError: ``positions`` is not ``(num_nodes, 2)``, an edge names a node outside
+                ``[0, num_nodes)``, is a self-loop or is listed twice, or two neighbours of one
+                node fall into the same direction slot.
         """
         positions = np.asarray(positions, dtype=np.float64)
         edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+        if positions.ndim != 2 or positions.shape[1] != 2:
+            raise ValueError(f"positions must have shape (num_nodes, 2), got {positions.shape}")
         num_nodes = positions.shape[0]
+        outside = (edges < 0) | (edges >= num_nodes)
+        if outside.any():
+            u, v = edges[np.flatnonzero(outside.any(axis=1))[0]]
+            raise ValueError(f"edge ({u}, {v}) names a node outside [0, {num_nodes})")
         neighbors = np.full((num_nodes, NUM_SLOTS), -1, dtype=np.int64)
         for u, v in edges:
             if u == v:

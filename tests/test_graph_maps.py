@@ -37,6 +37,16 @@ def test_from_edges_rejects_two_neighbours_in_one_slot() -> None:
     positions = np.array([(0, 0), (1, 0.1), (1, -0.1)], float)
     with pytest.raises(ValueError, match="two neighbours in slot 'east'"):
         SpatialGraph.from_edges(positions, [(0, 1), (0, 2)])
+    with pytest.raises(ValueError, match=r"edge \(1, 5\) names a node outside \[0, 3\)"):
+        SpatialGraph.from_edges(positions, [(0, 1), (1, 5)])
+    with pytest.raises(ValueError, match=r"edge \(0, -1\) names a node outside"):
+        SpatialGraph.from_edges(positions, [(0, -1)])
+    with pytest.raises(
+        ValueError, match=r"positions must have shape \(num_nodes, 2\), got \(3, 3\)"
+    ):
+        SpatialGraph.from_edges(np.zeros((3, 3)), [(0, 1)])
+    with pytest.raises(ValueError, match=r"edge \(0, 0\) is a self-loop"):
+        SpatialGraph.from_edges(positions, [(0, 0)])
 
 
 def test_lattice_from_grid_drops_diagonals_and_small_components() -> None:
