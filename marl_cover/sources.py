@@ -124,10 +124,12 @@ def make_map_source(config: CoverageConfig) -> MapSource:
 
     Raises:
         FileNotFoundError: the map file (or the paper's map) is missing, naming the path.
-        ValueError: the maps are too small for the team, or ``map`` is not understood.
+        ValueError: the maps are too small for the team, ``map`` is not understood, or a given
+            ``graph``'s neighbour table is not symmetric.
     """
     source: MapSource
     if config.graph is not None:
+        config.graph.validate()  # a hand-made table: moves and ego-graphs assume symmetry
         source = FixedMap(config.graph)
     elif config.map == "city":
         source = CityMap(CityConfig(num_waypoints=config.city_size))

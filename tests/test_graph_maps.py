@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+import marl_cover
 from marl_cover.city import CityConfig, generate_city
 from marl_cover.graph import SpatialGraph
 from marl_cover.maps import (
@@ -180,3 +181,10 @@ def test_city_is_seeded() -> None:
     c = generate_city(np.random.default_rng(4))
     assert np.array_equal(a.positions, b.positions)
     assert not np.array_equal(a.positions, c.positions)
+
+
+def test_env_refuses_a_one_way_neighbour_table() -> None:
+    positions = np.array([(0, 0), (5, 0)], float)
+    one_way = SpatialGraph(positions, np.array([[1, -1, -1, -1], [-1, -1, -1, -1]]), cell_size=5.0)
+    with pytest.raises(ValueError, match="not symmetric: node 0 has 1 in slot 'east'"):
+        marl_cover.parallel_env(graph=one_way, num_robots=1)
