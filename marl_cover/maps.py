@@ -42,18 +42,31 @@ def load_occupancy(path: str | os.PathLike[str]) -> np.ndarray:
     if not path.is_file():
         raise FileNotFoundError(f"occupancy grid not found: {path}")
     if path.suffix.lower() == ".npy":
-        grid = np.load(path, allow_pickle=False)
-        if grid.dtype != np.bool_:
-            if not np.issubdtype(grid.dtype, np.number) or not np.isin(grid, (0, 1)).all():
-                raise ValueError(f"{path}: expected a boolean or 0/1 grid, got dtype {grid.dtype}")
-            grid = grid.astype(bool)
+        try:
+            grid = np.load(path, allow_pickle=False)
+        except (ValueError, OSError) as error:  # not an .npy array file
+            raise ValueError(f"{path}: not a numpy grid ({error})") from None
     else:
         from PIL import Image
 
         with Image.open(path) as image:
             grid = np.asarray(image.convert("L")) < 128
+    return as_occupancy(grid, str(path))
+
+
+def as_occupancy(grid: np.ndarray, name: str = "occupied") -> np.ndarray:
+    """``grid`` as a boolean occupancy grid ``(rows, cols)``.
+
+    Raises:
+        ValueError: it is not a non-empty 2-D array of booleans or of 0/1 numbers, naming it.
+    """
+    grid = np.asarray(grid)
+    if grid.dtype != np.bool_:
+        if not np.issubdtype(grid.dtype, np.number) or not np.isin(grid, (0, 1)).all():
+            raise ValueError(f"{name}: expected a boolean or 0/1 grid, got dtype {grid.dtype}")
+        grid = grid.astype(bool)
     if grid.ndim != 2 or min(grid.shape) == 0:
-        raise ValueError(f"{path}: expected a non-empty 2-D grid, got shape {grid.shape}")
+        raise ValueError(f"{name}: expected a non-empty 2-D grid, got shape {grid.shape}")
     return grid
 
 
@@ -90,9 +103,9 @@ def graph_from_occupancy(
         largest_component: Keep only the largest connected component.
 
     Raises:
-        ValueError: no free cell qualifies.
+        ValueError: ``occupied`` is not a 2-D grid of booleans or 0/1, or no free cell qualifies.
     """
-    occupied = np.asarray(occupied, dtype=bool)
+    occupied = as_occupancy(occupied)
     cells = candidate_cells(occupied, perimeter)
     if len(cells) == 0:
         raise ValueError("the occupancy grid has no free cell to place a waypoint on")

@@ -157,6 +157,31 @@ def test_load_occupancy_formats_and_errors(tmp_path) -> None:
         load_occupancy(tmp_path / "bad.npy")
     with pytest.raises(FileNotFoundError, match="missing.npy"):
         load_occupancy(tmp_path / "missing.npy")
+    (tmp_path / "garbage.npy").write_bytes(b"not an array")
+    with pytest.raises(ValueError, match=r"garbage\.npy: not a numpy grid"):
+        load_occupancy(tmp_path / "garbage.npy")
+
+
+@pytest.mark.parametrize(
+    ("grid", "message"),
+    [
+        (
+            np.zeros((3, 3, 3), dtype=bool),
+            r"occupied: expected a non-empty 2-D grid, got shape \(3, 3, 3\)",
+        ),
+        (
+            np.zeros((0, 4), dtype=bool),
+            r"occupied: expected a non-empty 2-D grid, got shape \(0, 4\)",
+        ),
+        (
+            np.array([[0.5, 2.0], [3.0, -1.0]]),
+            "occupied: expected a boolean or 0/1 grid, got dtype float64",
+        ),
+    ],
+)
+def test_grids_in_memory_are_checked_like_files(grid: np.ndarray, message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        graph_from_occupancy(grid, cell_size=5.0)
 
 
 def test_a_grid_file_without_free_cells_is_named(tmp_path) -> None:
