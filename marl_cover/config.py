@@ -184,6 +184,15 @@ class CoverageConfig:
                 f"got {self.invalid_action!r}",
             ),
             (self.city_size >= 1, f"city_size must be >= 1, got {self.city_size}"),
+            (self.map_cell_size > 0, f"map_cell_size must be > 0 metres, got {self.map_cell_size}"),
+            (
+                self.map_perimeter is None or self.map_perimeter >= 0,
+                f"map_perimeter must be >= 0 cells or null, got {self.map_perimeter}",
+            ),
+            (
+                self.min_window_nodes >= 1,
+                f"min_window_nodes must be >= 1, got {self.min_window_nodes}",
+            ),
             (
                 self.window_fraction is None or 0.0 < self.window_fraction <= 1.0,
                 f"window_fraction must be in (0, 1], got {self.window_fraction}",

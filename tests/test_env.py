@@ -203,6 +203,14 @@ def test_config_errors_name_the_key(path_graph: SpatialGraph) -> None:
         marl_cover.parallel_env(map="nowhere.npy")
     with pytest.raises(TypeError, match="not both"):
         marl_cover.parallel_env(max_steps=3, max_cycles=3)
+    for kwargs, message in (
+        ({"map_cell_size": -1.0}, "map_cell_size must be > 0 metres, got -1.0"),
+        ({"map_perimeter": -5.0}, "map_perimeter must be >= 0 cells or null, got -5.0"),
+        ({"min_window_nodes": 0}, "min_window_nodes must be >= 1, got 0"),
+        ({"start_density": 0}, "start_density must be >= 1, got 0"),
+    ):
+        with pytest.raises(ValueError, match=message):
+            CoverageConfig(**kwargs)
 
 
 @pytest.mark.parametrize(
