@@ -227,6 +227,24 @@ def test_configs_reject_values_of_the_wrong_type(tmp_path) -> None:
     assert configuration.load(BCConfig, None, ["lr=1"]).lr == 1  # an integer is a number
 
 
+@pytest.mark.parametrize(
+    ("override", "message"),
+    [
+        ("lr=0", "lr must be > 0, got 0"),
+        ("lr_decay=1.5", r"lr_decay must be in \(0, 1\], got 1.5"),
+        ("select_episodes=0", "select_episodes must be >= 1, got 0"),
+        ("threads=0", "threads must be >= 1, got 0"),
+        ("dagger.beta=2", r"dagger.beta must be in \[0, 1\], got 2"),
+        ("dagger.rounds=-1", "dagger.rounds and dagger.steps must be >= 0"),
+        ("dagger.episodes=0", "dagger.episodes must be >= 1, got 0"),
+        ("model.node_features=0", "node_features and edge_features must be >= 1"),
+    ],
+)
+def test_configs_name_values_out_of_range(override: str, message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        configuration.load(BCConfig, None, [override])
+
+
 def small_dataset(folder) -> None:  # noqa: ANN001
     episodes = record(range(12))
     write_shard(folder / "shard_00000.npz", episodes[:6])

@@ -250,6 +250,16 @@ def test_config_errors_name_the_key(tmp_path: Path) -> None:
     if not torch.cuda.is_available():
         with pytest.raises(ValueError, match="no CUDA"):
             train_mappo(tiny_config(tmp_path, "device=cuda"))
+    for override, message in (
+        ("loss.gamma=1.5", r"loss.gamma must be in \(0, 1\], got 1.5"),
+        ("loss.lmbda=-0.1", r"loss.lmbda must be in \[0, 1\], got -0.1"),
+        ("loss.clip_epsilon=0", "loss.clip_epsilon must be > 0, got 0"),
+        ("optim.lr=0", "optim.lr and optim.critic_lr must be > 0"),
+        ("model.temperature=0", "model.temperature must be > 0, got 0"),
+        ("eval.every=0", "eval.every and eval.episodes must be >= 1"),
+    ):
+        with pytest.raises(ValueError, match=message):
+            tiny_config(tmp_path, override)
 
 
 def test_train_mappo_script_smoke_and_resume(tmp_path: Path) -> None:

@@ -90,8 +90,12 @@ class GNNConfig:
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
             raise ValueError(f"kind must be one of {KINDS}, got {self.kind!r}")
-        if self.hops < 1 or self.hidden < 1 or self.mlp_layers < 1:
-            raise ValueError("hops, hidden and mlp_layers must be >= 1")
+        if min(self.hops, self.hidden, self.mlp_layers, self.node_features, self.edge_features) < 1:
+            raise ValueError(
+                "hops, hidden, mlp_layers, node_features and edge_features must be >= 1, got "
+                f"{self.hops}, {self.hidden}, {self.mlp_layers}, {self.node_features}, "
+                f"{self.edge_features}"
+            )
         if self.residual and self.kind == "linear":
             raise ValueError("residual applies to the non-linear model only")
         if self.per_hop and self.kind == "linear":

@@ -148,6 +148,19 @@ class DaggerConfig:
             raise ValueError("dagger.expert_information applies to a routing expert only")
         if self.env and self.fraction is None:
             raise ValueError("dagger.env needs dagger.fraction (the share of its states)")
+        for ok, message in (
+            (self.rounds >= 0 and self.steps >= 0, "dagger.rounds and dagger.steps must be >= 0"),
+            (self.episodes >= 1, f"dagger.episodes must be >= 1, got {self.episodes}"),
+            (0.0 <= self.beta <= 1.0, f"dagger.beta must be in [0, 1], got {self.beta}"),
+            (
+                0.0 <= self.beta_decay <= 1.0,
+                f"dagger.beta_decay must be in [0, 1], got {self.beta_decay}",
+            ),
+            (self.iterations >= 1, f"dagger.iterations must be >= 1, got {self.iterations}"),
+            (self.seed >= 0, f"dagger.seed must be >= 0, got {self.seed}"),
+        ):
+            if not ok:
+                raise ValueError(message)
 
 
 @dataclass
@@ -196,6 +209,23 @@ class BCConfig:
             raise ValueError(f"logger must be one of {LOGGERS}, got {self.logger!r}")
         if len(self.holdout_seeds) != 2:
             raise ValueError("holdout_seeds is [first, stop)")
+        for ok, message in (
+            (self.lr > 0, f"lr must be > 0, got {self.lr}"),
+            (0.0 < self.lr_decay <= 1.0, f"lr_decay must be in (0, 1], got {self.lr_decay}"),
+            (self.lr_decay_every >= 1, f"lr_decay_every must be >= 1, got {self.lr_decay_every}"),
+            (
+                self.max_episodes is None or self.max_episodes >= 1,
+                f"max_episodes must be >= 1 or null, got {self.max_episodes}",
+            ),
+            (
+                self.select_episodes >= 1,
+                f"select_episodes must be >= 1, got {self.select_episodes}",
+            ),
+            (self.seed >= 0 and self.select_seed >= 0, "seed and select_seed must be >= 0"),
+            (self.threads >= 1, f"threads must be >= 1, got {self.threads}"),
+        ):
+            if not ok:
+                raise ValueError(message)
 
     @property
     def total_steps(self) -> int:

@@ -206,6 +206,41 @@ class MAPPOConfig:
             raise ValueError(f"loss.anchor_coef must be >= 0, got {self.loss.anchor_coef}")
         if self.loss.anchor_coef > 0 and self.init is None:
             raise ValueError("loss.anchor_coef > 0 needs init= (the policy to stay near)")
+        self._check_ranges()
+
+    def _check_ranges(self) -> None:
+        """Names a rate, coefficient or count outside its range."""
+        loss, optim, ev = self.loss, self.optim, self.eval
+        for ok, message in (
+            (0.0 < loss.gamma <= 1.0, f"loss.gamma must be in (0, 1], got {loss.gamma}"),
+            (0.0 <= loss.lmbda <= 1.0, f"loss.lmbda must be in [0, 1], got {loss.lmbda}"),
+            (loss.clip_epsilon > 0, f"loss.clip_epsilon must be > 0, got {loss.clip_epsilon}"),
+            (
+                loss.entropy_coef >= 0 and loss.critic_coef >= 0,
+                "loss.entropy_coef and loss.critic_coef must be >= 0",
+            ),
+            (loss.reward_scale > 0, f"loss.reward_scale must be > 0, got {loss.reward_scale}"),
+            (
+                optim.lr > 0 and (optim.critic_lr is None or optim.critic_lr > 0),
+                "optim.lr and optim.critic_lr must be > 0",
+            ),
+            (
+                optim.max_grad_norm > 0,
+                f"optim.max_grad_norm must be > 0, got {optim.max_grad_norm}",
+            ),
+            (optim.critic_warmup_iters >= 0, "optim.critic_warmup_iters must be >= 0"),
+            (
+                self.model.temperature > 0,
+                f"model.temperature must be > 0, got {self.model.temperature}",
+            ),
+            (
+                ev.every >= 1 and ev.episodes >= 1 and ev.seed >= 0,
+                "eval.every and eval.episodes must be >= 1 and eval.seed >= 0",
+            ),
+            (self.seed >= 0 and self.threads >= 1, "seed must be >= 0 and threads >= 1"),
+        ):
+            if not ok:
+                raise ValueError(message)
 
     @property
     def needs_ego(self) -> bool:
