@@ -12,6 +12,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from agents.cli import non_negative_int, positive_int  # noqa: E402
 from agents.greedy import GreedyPolicy  # noqa: E402
 from marl_cover import parallel_env  # noqa: E402
 from marl_cover.inspection import draw_ego, ego_to_networkx  # noqa: E402
@@ -20,16 +21,21 @@ from marl_cover.inspection import draw_ego, ego_to_networkx  # noqa: E402
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--map", default="city")
-    parser.add_argument("--hops", type=int, default=19)
-    parser.add_argument("--robots", type=int, default=4)
-    parser.add_argument("--robot", type=int, default=0, help="index of the ego robot")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--steps", type=int, default=0, help="greedy steps before inspecting")
+    parser.add_argument("--hops", type=positive_int, default=19)
+    parser.add_argument("--robots", type=positive_int, default=4)
+    parser.add_argument("--robot", type=non_negative_int, default=0, help="index of the ego robot")
+    parser.add_argument("--seed", type=non_negative_int, default=0)
+    parser.add_argument(
+        "--steps", type=non_negative_int, default=0, help="greedy steps before inspecting"
+    )
     parser.add_argument("--out", type=Path, default=Path("outputs/ego.png"))
     args = parser.parse_args()
     if not 0 <= args.robot < args.robots:
         parser.error(f"--robot must be in [0, {args.robots})")
-    env = parallel_env(map=args.map, hops=args.hops, num_robots=args.robots)
+    try:
+        env = parallel_env(map=args.map, hops=args.hops, num_robots=args.robots)
+    except (FileNotFoundError, ValueError) as error:
+        parser.error(str(error))
     obs, _ = env.reset(seed=args.seed)
     policy = GreedyPolicy(args.hops, fallback="random", seed=args.seed)
     for _ in range(args.steps):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import networkx as nx
 import numpy as np
 import pytest
-from helpers import random_grid_graph
+from helpers import random_grid_graph, run_script
 
 import marl_cover
 from marl_cover.ego import NUM_ACTIONS, action_targets
@@ -123,3 +123,22 @@ def test_numba_and_numpy_backends_agree(seed: int) -> None:
             assert fast[key].dtype == value.dtype, key
             np.testing.assert_array_equal(fast[key], value, err_msg=key)
         env.step({a: int(rng.integers(NUM_ACTIONS)) for a in env.agents})
+
+
+def test_inspect_ego_script_draws_one_robots_view(tmp_path) -> None:
+    pytest.importorskip("matplotlib")
+    pytest.importorskip("networkx")
+    out = tmp_path / "ego.png"
+    done = run_script(
+        "inspect_ego.py", "--hops", "4", "--robot", "1", "--steps", "2", "--out", str(out)
+    )
+    assert done.returncode == 0, done.stderr
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    for args, message in (
+        (["--seed", "-1"], "--seed: expected an integer >= 0, got '-1'"),
+        (["--robot", "4"], "--robot must be in [0, 4)"),
+        (["--map", "nowhere.npy"], "occupancy grid not found: nowhere.npy"),
+    ):
+        refused = run_script("inspect_ego.py", *args, "--out", str(out))
+        assert refused.returncode != 0 and message in refused.stderr
+        assert "Traceback" not in refused.stderr
