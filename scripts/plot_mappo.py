@@ -75,7 +75,10 @@ def main(argv: list[str]) -> None:
     references = paper_lines()
     for item in args.line:
         name, _, value = item.partition("=")
-        references[name] = float(value)
+        try:
+            references[name] = float(value)
+        except ValueError:
+            parser.error(f"--line takes name=number, got {item!r}")
     for index, (name, value) in enumerate(references.items()):
         axis.axhline(
             value, color=f"C{index + len(args.runs)}", ls="--", lw=1, label=f"{name} {value:g}"

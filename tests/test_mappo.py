@@ -292,6 +292,27 @@ def test_train_mappo_script_smoke_and_resume(tmp_path: Path) -> None:
     assert [row["iteration"] for row in curve] == [0, 1, 2, 3]  # 0: the untrained policy
     bad = run_script("train_mappo.py", *command[2:], "loss.gama=0.9")
     assert bad.returncode != 0 and "gama" in bad.stderr
+    # the learning curves of the run: a PNG and a table row from its curve.json
+    png = tmp_path / "curves.png"
+    plotted = run_script(
+        "plot_mappo.py", str(tmp_path / "smoke"), "--line", "BC=80", "--out", str(png)
+    )
+    assert plotted.returncode == 0, plotted.stderr[-3000:]
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    row = next(line for line in plotted.stdout.splitlines() if line.startswith("smoke"))
+    evaluations = [r["eval_reward"] for r in curve if "eval_reward" in r]
+    assert row.split()[1:] == [
+        "3",
+        f"{curve[-1]['observations']:.0f}",
+        f"{evaluations[-1]:.2f}",
+        f"{max(evaluations):.2f}",
+    ]
+    for args, message in (
+        ([str(tmp_path)], "no curve.json"),
+        (["--line", "BC=high"], "name=number"),
+    ):
+        refused = run_script("plot_mappo.py", *args, str(tmp_path / "smoke"), "--out", str(png))
+        assert refused.returncode != 0 and message in refused.stderr
 
 
 def test_print_config_shows_the_settings_and_trains_nothing(tmp_path: Path) -> None:
