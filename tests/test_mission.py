@@ -163,3 +163,31 @@ def test_run_mission_script(tmp_path: Path) -> None:
     bad = run_script("run_mission.py", *args, "seeds=ten")
     assert bad.returncode != 0 and "Traceback" not in bad.stderr
     assert bad.stderr.strip().endswith("MissionConfig.seeds must be an integer, got 'ten' (str)")
+
+
+def test_bench_mission_reports_each_flight(tmp_path: Path) -> None:
+    """The speed benchmark's JSON: one row per flight, each factor its simulated seconds over its
+    wall seconds, and the slowest per method; the missions are those of ``run_mission``."""
+    out = tmp_path / "bench.json"
+    args = ["map=city", "num_robots=3", "dynamics.max_time=20"]
+    done = run_script(
+        "bench_mission.py", "--methods", "greedy", "--seeds", "0", "1", "--out", str(out), *args
+    )
+    assert done.returncode == 0, done.stderr
+    report = json.loads(out.read_text())
+    rows = report["rows"]
+    assert [(r["method"], r["seed"]) for r in rows] == [("greedy", 0), ("greedy", 1)]
+    for row in rows:
+        assert row["real_time_factor"] == pytest.approx(
+            row["mission_seconds"] / row["wall_seconds"]
+        )
+        assert 0 < row["policy_seconds"] < row["wall_seconds"]
+    assert report["min_real_time_factor"] == {"greedy": min(r["real_time_factor"] for r in rows)}
+    from agents.configuration import load
+
+    config = load(MissionConfig, ROOT / "configs/mission.yaml", args)
+    flown = run_mission(config.make_env(), make_mission_policy("greedy", config), 1)
+    assert (flown.mission_seconds, flown.decisions) == (
+        rows[1]["mission_seconds"],
+        rows[1]["decisions"],
+    )
