@@ -2,12 +2,19 @@
 
 from __future__ import annotations
 
-import pytest
+import json
+from pathlib import Path
 
+import pytest
+from helpers import run_script
+
+from agents.configuration import load
 from agents.greedy import GreedyPolicy
 from agents.mission import MissionConfig, make_mission_policy, run_mission
 from agents.mission_diagnostics import DecisionRecorder
 from marl_cover.continuous import QuadrotorCoverageEnv
+
+ROOT = Path(__file__).resolve().parent.parent
 
 EAST, WEST = 1, 3
 
@@ -132,3 +139,25 @@ def test_nearest_blind_moves_head_for_the_nearest_point_anywhere(path_graph) -> 
     recorder.reset(0)
     observations, _ = env.reset(seed=0, options={"robot_nodes": [4], "interest_nodes": [0]})
     assert recorder.act({"robot_0": observations["robot_0"]}) == {"robot_0": WEST}
+
+
+def test_diagnose_script_sorts_every_decision_of_the_missions(tmp_path: Path) -> None:
+    """With the policy's own blind moves the script flies greedy's own missions (the totals of
+    ``run_mission`` alone), and its table is a :class:`DecisionRecorder`'s over them."""
+    out = tmp_path / "diag.json"
+    args = ["methods=[greedy]", "seeds=2", "map=city", "num_robots=3", "hops=2"]
+    args += ["dynamics.max_time=20"]
+    done = run_script("diagnose_mission.py", "--out", str(out), *args)
+    assert done.returncode == 0, done.stderr
+    result = json.loads(out.read_text())["methods"]["greedy"]
+    config = load(MissionConfig, ROOT / "configs/mission.yaml", args)
+    env = config.make_env()
+    alone = [run_mission(env, make_mission_policy("greedy", config), seed) for seed in (0, 1)]
+    assert result["totals"] == [r.total for r in alone]  # the recorder changes nothing
+    recorder = DecisionRecorder(make_mission_policy("greedy", config), env)
+    for seed in (0, 1):
+        run_mission(env, recorder, seed)
+    assert result["decisions"] == recorder.table()
+    assert sum(result["decisions"]["blind"].values()) > 0  # two hops leave robots blind
+    refused = run_script("diagnose_mission.py", "--out", str(out), "methods=[expert]")
+    assert refused.returncode != 0 and "no decentralized method" in refused.stderr
