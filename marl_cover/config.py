@@ -26,6 +26,14 @@ RENDER_MODES = ("human", "rgb_array")
 T = TypeVar("T")
 
 
+def require(*checks: tuple[bool, str], prefix: str = "") -> None:
+    """Raises ``ValueError(prefix + message)`` for the first ``(ok, message)`` that is not ok:
+    the range checks of the configs' ``__post_init__``."""
+    for ok, message in checks:
+        if not ok:
+            raise ValueError(prefix + message)
+
+
 def check_field_types(config: Any) -> None:
     """Checks the fields of dataclass ``config`` against their annotations.
 
@@ -210,9 +218,7 @@ class CoverageConfig:
                 f"graph must be a SpatialGraph, got {type(self.graph).__name__}",
             ),
         ]
-        for ok, message in checks:
-            if not ok:
-                raise ValueError(message)
+        require(*checks)
 
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> CoverageConfig:

@@ -50,7 +50,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from marl_cover.collisions import resolve_collisions
-from marl_cover.config import CoverageConfig, check_field_types, config_from_dict
+from marl_cover.config import CoverageConfig, check_field_types, config_from_dict, require
 from marl_cover.dynamics import (
     DYNAMICS_BACKENDS,
     QuadrotorParams,
@@ -195,9 +195,7 @@ class DynamicsConfig:
             (self.backend in DYNAMICS_BACKENDS, f"backend must be one of {DYNAMICS_BACKENDS}"),
             (self.observe in OBSERVE_MODES, f"observe must be one of {OBSERVE_MODES}"),
         ]
-        for ok, message in checks:
-            if not ok:
-                raise ValueError(f"DynamicsConfig: {message}")
+        require(*checks, prefix="DynamicsConfig: ")
 
     @property
     def substeps(self) -> int:

@@ -60,6 +60,7 @@ from agents.models.gnn import AggregationGNN, GNNConfig, action_logits
 from agents.models.policy import EnsemblePolicy, GNNPolicy, load_model, save_model
 from agents.training.data import GraphTable, collate_states, episode_transitions
 from agents.training.runs import LOGGERS, check_same_run, make_logger
+from marl_cover.config import require
 from marl_cover.ego import NUM_ACTIONS
 from marl_cover.env import CoverageEnv
 
@@ -148,7 +149,7 @@ class DaggerConfig:
             raise ValueError("dagger.expert_information applies to a routing expert only")
         if self.env and self.fraction is None:
             raise ValueError("dagger.env needs dagger.fraction (the share of its states)")
-        for ok, message in (
+        require(
             (self.rounds >= 0 and self.steps >= 0, "dagger.rounds and dagger.steps must be >= 0"),
             (self.episodes >= 1, f"dagger.episodes must be >= 1, got {self.episodes}"),
             (0.0 <= self.beta <= 1.0, f"dagger.beta must be in [0, 1], got {self.beta}"),
@@ -158,9 +159,7 @@ class DaggerConfig:
             ),
             (self.iterations >= 1, f"dagger.iterations must be >= 1, got {self.iterations}"),
             (self.seed >= 0, f"dagger.seed must be >= 0, got {self.seed}"),
-        ):
-            if not ok:
-                raise ValueError(message)
+        )
 
 
 @dataclass
@@ -209,7 +208,7 @@ class BCConfig:
             raise ValueError(f"logger must be one of {LOGGERS}, got {self.logger!r}")
         if len(self.holdout_seeds) != 2:
             raise ValueError("holdout_seeds is [first, stop)")
-        for ok, message in (
+        require(
             (self.lr > 0, f"lr must be > 0, got {self.lr}"),
             (0.0 < self.lr_decay <= 1.0, f"lr_decay must be in (0, 1], got {self.lr_decay}"),
             (self.lr_decay_every >= 1, f"lr_decay_every must be >= 1, got {self.lr_decay_every}"),
@@ -223,9 +222,7 @@ class BCConfig:
             ),
             (self.seed >= 0 and self.select_seed >= 0, "seed and select_seed must be >= 0"),
             (self.threads >= 1, f"threads must be >= 1, got {self.threads}"),
-        ):
-            if not ok:
-                raise ValueError(message)
+        )
 
     @property
     def total_steps(self) -> int:

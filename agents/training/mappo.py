@@ -63,6 +63,7 @@ from agents.models.gnn import AggregationGNN, GNNConfig
 from agents.models.policy import GNNPolicy, load_model, make_actor, make_state_actor, save_model
 from agents.models.value import AGGREGATES, EgoValue, StateValue
 from agents.training.runs import LOGGERS, check_same_run, make_logger
+from marl_cover.config import require
 from marl_cover.env import CoverageEnv
 
 logger = logging.getLogger(__name__)
@@ -211,7 +212,7 @@ class MAPPOConfig:
     def _check_ranges(self) -> None:
         """Names a rate, coefficient or count outside its range."""
         loss, optim, ev = self.loss, self.optim, self.eval
-        for ok, message in (
+        require(
             (0.0 < loss.gamma <= 1.0, f"loss.gamma must be in (0, 1], got {loss.gamma}"),
             (0.0 <= loss.lmbda <= 1.0, f"loss.lmbda must be in [0, 1], got {loss.lmbda}"),
             (loss.clip_epsilon > 0, f"loss.clip_epsilon must be > 0, got {loss.clip_epsilon}"),
@@ -238,9 +239,7 @@ class MAPPOConfig:
                 "eval.every and eval.episodes must be >= 1 and eval.seed >= 0",
             ),
             (self.seed >= 0 and self.threads >= 1, "seed must be >= 0 and threads >= 1"),
-        ):
-            if not ok:
-                raise ValueError(message)
+        )
 
     @property
     def needs_ego(self) -> bool:
