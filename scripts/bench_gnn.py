@@ -13,7 +13,9 @@ their K.
 
 ``--repeats R`` times every case R times, the passes interleaved across the three modes, and
 reports the lowest median: these machines slow down by up to 1.5x when another process wakes,
-and the lowest pass is the code's speed with the least of that.
+and the lowest pass is the code's speed with the least of that. Each row also records the
+largest logit difference between its modes on the recorded states (``max_logit_gap``): the
+modes time the same controller, and the script exits with an error when they disagree.
 """
 
 from __future__ import annotations
@@ -44,6 +46,8 @@ PAPER_MS = {
     ("linear", 19): 171 / 50,
 }
 GRAPH_KEYS = ("nodes", "edge_index", "edge_attr", "edge_mask")
+#: Largest logit difference between the timed modes that float rounding explains.
+GAP_TOLERANCE = 1e-3
 
 
 def record_states(env_kwargs: dict, steps: int) -> list[tuple[dict, dict]]:
@@ -64,34 +68,56 @@ def record_states(env_kwargs: dict, steps: int) -> list[tuple[dict, dict]]:
     return pairs
 
 
+def mode_logits(
+    model: AggregationGNN, observations: dict, state: dict, mode: str, device: str
+) -> np.ndarray:
+    """Action logits on the host from numpy observations, as a controller computes them.
+
+    ``mode``: ``"central"`` (one pass over the state; ``(R, 5)``), ``"decentral"`` (every
+    robot's ego-graph in one batch; ``(R, 5)``) or ``"one_robot"`` (robot 0's ego-graph
+    alone, what each robot computes on its own computer; ``(1, 5)``).
+    """
+    if mode == "central":
+        tensors = {k: torch.from_numpy(v).to(device) for k, v in state.items()}
+        logits = centralized_logits(model, tensors)
+    else:
+        robots = slice(0, 1) if mode == "one_robot" else slice(None)
+        tensors = {k: torch.from_numpy(observations[k][robots]).to(device) for k in GRAPH_KEYS}
+        logits = decentralized_logits(model, tensors)
+    return logits.cpu().numpy()
+
+
 def time_policy(model: AggregationGNN, pairs: list, mode: str, device: str) -> float:
     """Median milliseconds from numpy observations to actions on the host, over one pass on
-    the recorded states.
-
-    ``mode``: ``"central"`` (one pass over the state), ``"decentral"`` (every robot's
-    ego-graph in one batch) or ``"one_robot"`` (robot 0's ego-graph alone: what each robot
-    computes on its own computer).
-    """
-
-    def decide(observations: dict, state: dict) -> np.ndarray:
-        if mode == "central":
-            tensors = {k: torch.from_numpy(v).to(device) for k, v in state.items()}
-            logits = centralized_logits(model, tensors)
-        else:
-            robots = slice(0, 1) if mode == "one_robot" else slice(None)
-            tensors = {k: torch.from_numpy(observations[k][robots]).to(device) for k in GRAPH_KEYS}
-            logits = decentralized_logits(model, tensors)
-        return logits.argmax(-1).cpu().numpy()
-
+    the recorded states (:func:`mode_logits` and the argmax)."""
     times = []
     with torch.inference_mode():
         for observations, state in pairs[:5]:  # warm-up
-            decide(observations, state)
+            mode_logits(model, observations, state, mode, device).argmax(-1)
         for observations, state in pairs:
             start = time.perf_counter()
-            decide(observations, state)
+            mode_logits(model, observations, state, mode, device).argmax(-1)
             times.append(time.perf_counter() - start)
     return 1000.0 * float(np.median(times))
+
+
+def logit_gap(model: AggregationGNN, pairs: list, modes: tuple[str, ...], device: str) -> float:
+    """Largest difference between the timed modes' logits of the same robot on the recorded
+    states (every mode computes the same controller: a gap above float rounding is a bug);
+    infinite where the modes mask different actions."""
+    gap = 0.0
+    with torch.inference_mode():
+        for observations, state in pairs:
+            reference = mode_logits(model, observations, state, modes[-1], device)
+            for mode in modes[:-1]:
+                logits = mode_logits(model, observations, state, mode, device)
+                other = reference[: len(logits)]
+                finite = np.isfinite(logits)
+                if not np.array_equal(finite, np.isfinite(other)):
+                    return float("inf")
+                if finite.any():
+                    gap = max(gap, float(np.abs(logits[finite] - other[finite]).max()))
+    return gap
 
 
 def time_modes(
@@ -127,7 +153,7 @@ def main() -> None:
     )
     print(
         f"{'model':<10} {'K':>3} {'robots':>6} {'map':<12} {'one robot':>10} {'decentral':>10} "
-        f"{'central':>9} {'paper':>7}"
+        f"{'central':>9} {'paper':>7} {'logit gap':>10}"
     )
     files = [(path, load_model(path)[0]) for path in args.checkpoints]
     cases = [(hops, 4, "paper") for hops in args.hops] + [(19, 100, "paper_large")]
@@ -147,6 +173,7 @@ def main() -> None:
             one = timed.get("one_robot", float("nan"))
             decentral = timed.get("decentral", float("nan"))
             central = timed["central"]
+            gap = logit_gap(model, pairs, modes, args.device) if len(modes) > 1 else 0.0
             paper = PAPER_MS.get((kind, hops)) if robots == 4 else None
             rows.append(
                 {
@@ -160,11 +187,12 @@ def main() -> None:
                     "decentralized_ms": decentral,
                     "centralized_ms": central,
                     "paper_ms": paper,
+                    "max_logit_gap": gap,
                 }
             )
             print(
                 f"{kind:<10} {hops:>3} {robots:>6} {map_name:<12} {one:>10.2f} {decentral:>10.2f} "
-                f"{central:>9.2f} {paper if paper else float('nan'):>7.2f}"
+                f"{central:>9.2f} {paper if paper else float('nan'):>7.2f} {gap:>10.1e}"
             )
     record = {
         "device": args.device,
@@ -176,6 +204,8 @@ def main() -> None:
     }
     write_text_atomic(args.out, json.dumps(record, indent=2))
     print(f"wrote {args.out}")
+    if any(row["max_logit_gap"] > GAP_TOLERANCE for row in rows):
+        raise SystemExit(f"the modes' logits differ by more than {GAP_TOLERANCE} (logit gap)")
 
 
 if __name__ == "__main__":

@@ -6,7 +6,8 @@
 (overrides go before ``--kinds``/``--hops``, whose value lists would swallow them).
 
 Each run goes to ``OUT/<kind>_k<K>`` (the folder ``scripts/reproduce_paper.py --models OUT``
-reads); a finished run (``model.pt`` present) is skipped, an interrupted one resumes.
+reads); a finished run (``model.pt`` present) is skipped, an interrupted one resumes. Every
+run's settings are checked before the first one trains.
 """
 
 from __future__ import annotations
@@ -33,15 +34,21 @@ def main(argv: list[str]) -> None:
     parser.add_argument("--out", type=Path, default=Path("outputs/bc"))
     parser.add_argument("overrides", nargs="*")
     args = parser.parse_args(argv)
-    for kind in args.kinds:
-        for hops in args.hops:
-            out = args.out / f"{kind}_k{hops}"
-            if (out / "model.pt").exists():
-                continue
-            overrides = [*args.overrides, f"model.kind={kind}", f"model.hops={hops}", f"out={out}"]
-            config = configuration.load_or_exit(BCConfig, args.config, overrides)
-            summary = train_bc(config)
-            print(f"{kind} K={hops}: {summary}", flush=True)
+    runs = [  # every run's config loads (and is checked) before any trains
+        configuration.load_or_exit(
+            BCConfig,
+            args.config,
+            [*args.overrides, f"model.kind={kind}", f"model.hops={hops}", f"out={out}"],
+        )
+        for kind in args.kinds
+        for hops in args.hops
+        for out in [args.out / f"{kind}_k{hops}"]
+    ]
+    for config in runs:
+        if (Path(config.out) / "model.pt").exists():
+            continue
+        summary = train_bc(config)
+        print(f"{config.model.kind} K={config.model.hops}: {summary}", flush=True)
 
 
 if __name__ == "__main__":

@@ -610,3 +610,53 @@ def test_dagger_can_distill_an_ensemble_of_networks(tmp_path) -> None:
         DaggerConfig(teacher=teacher)
     with pytest.raises(ValueError, match="at least one model"):
         EnsemblePolicy([])
+
+
+def test_sweep_runs_each_kind_and_receptive_field_and_resumes(tmp_path) -> None:
+    """``sweep_bc.py`` trains one model per (kind, K) in ``OUT/<kind>_k<K>``, skips a finished
+    run, resumes an interrupted one, and names a bad override before it trains anything."""
+    small_dataset(tmp_path / "data")
+    out = tmp_path / "sweep"
+    overrides = [
+        f"dataset={tmp_path / 'data'}",
+        "env.map=city",
+        "env.city_size=90",
+        "env.hops=3",
+        "env.max_steps=12",
+        "model.hidden=8",
+        "batch_size=8",
+        "val_every=10",
+        "val_fraction=0.25",
+        "select_episodes=2",
+        "holdout_seeds=[0,2]",
+        "logger=csv",
+        "progress=false",
+    ]
+
+    def sweep(steps: int, *kinds: str):  # noqa: ANN202
+        args = [*overrides, f"steps={steps}", "--kinds", *kinds, "--hops", "2", "3"]
+        return run_script("sweep_bc.py", *args, "--out", str(out))
+
+    done = sweep(10, "linear", "nonlinear")
+    assert done.returncode == 0, done.stderr
+    assert sorted(p.name for p in out.iterdir()) == [
+        "linear_k2",
+        "linear_k3",
+        "nonlinear_k2",
+        "nonlinear_k3",
+    ]
+    for folder in out.iterdir():
+        model, info = load_model(folder / "model.pt")
+        kind, hops = folder.name.split("_k")
+        assert (model.config.kind, model.config.hops, model.config.hidden) == (kind, int(hops), 8)
+        assert info["step"] == 10
+
+    (out / "linear_k3" / "model.pt").unlink()  # interrupted after its checkpoint at step 10
+    done = sweep(20, "linear")
+    assert done.returncode == 0, done.stderr
+    assert load_model(out / "linear_k2" / "model.pt")[1]["step"] == 10  # finished: skipped
+    assert load_model(out / "linear_k3" / "model.pt")[1]["step"] == 20  # resumed to 20
+    assert "linear K=2" not in done.stdout and "linear K=3" in done.stdout
+
+    done = sweep(-1, "linear")
+    assert done.returncode == 1 and "steps >= 0" in done.stderr
