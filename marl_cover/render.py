@@ -12,7 +12,13 @@ COVERED_COLOUR = "#59a14f"
 
 
 def _pyplot(interactive: bool):  # noqa: ANN202 (matplotlib module)
-    import matplotlib
+    try:
+        import matplotlib
+    except ImportError as error:
+        raise ImportError(
+            "rendering needs matplotlib, which is not installed "
+            "(pip install 'marl-cover[render]' or pip install matplotlib)"
+        ) from error
 
     if not interactive:
         matplotlib.use("Agg", force=False)

@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 import torch
+from helpers import run_script
 
 from marl_cover import parallel_env
-from tests.helpers import run_script
 
 torch.set_num_threads(1)
 
