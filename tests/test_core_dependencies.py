@@ -1,18 +1,19 @@
 """``marl_cover`` needs only numpy, scipy, gymnasium and pettingzoo: the environments run, and
 a missing optional package is named, in an interpreter where the optional ones cannot be
-imported."""
+imported. The baselines (greedy, the routing experts) and their evaluation need no torch."""
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 import textwrap
 
-from helpers import ROOT
+from helpers import ROOT, run_script
 
 OPTIONAL = ("torch", "torchrl", "tensordict", "ortools", "pyvrp", "numba", "matplotlib", "networkx")
 
-SCRIPT = textwrap.dedent(
+BLOCKER = textwrap.dedent(
     """
     import importlib.abc
     import sys
@@ -26,7 +27,11 @@ SCRIPT = textwrap.dedent(
             return None
 
     sys.meta_path.insert(0, Block())
+    """
+)
 
+SCRIPT = BLOCKER + textwrap.dedent(
+    """
     import numpy as np
     import pytest
     from pettingzoo.test import parallel_api_test
@@ -61,13 +66,54 @@ SCRIPT = textwrap.dedent(
 )
 
 
-def test_environments_run_without_the_optional_packages() -> None:
-    done = subprocess.run(
-        [sys.executable, "-c", SCRIPT, *OPTIONAL],
+BASELINES = BLOCKER + textwrap.dedent(
+    """
+    import runpy
+
+    for args in ARGS:
+        sys.argv = ["evaluate.py", *args]
+        runpy.run_path("scripts/evaluate.py", run_name="__main__")
+    leaked = sorted(m for m in sys.modules if m.split(".")[0] in BLOCKED)
+    assert not leaked, leaked
+    print("baselines ok")
+    """
+)
+
+
+def run_blocked(script: str, *blocked: str) -> subprocess.CompletedProcess:
+    """``script`` in a new interpreter at the repository root, ``blocked`` not importable."""
+    return subprocess.run(
+        [sys.executable, "-c", script, *blocked],
         capture_output=True,
         text=True,
         cwd=ROOT,
         timeout=300,
     )
+
+
+def test_environments_run_without_the_optional_packages() -> None:
+    done = run_blocked(SCRIPT, *OPTIONAL)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip().endswith("core ok")
+
+
+def test_baselines_are_evaluated_without_torch(tmp_path) -> None:  # noqa: ANN001
+    """Greedy and the routing expert, evaluated by ``scripts/evaluate.py`` where torch cannot
+    be imported, play the episodes they play beside it."""
+    runs = {
+        "greedy": ["policy=greedy", "map=city", "episodes=2"],
+        "expert": ["policy=expert", "map=city", "episodes=1", "expert.iterations=50"],
+    }
+    blocked = [[*args, f"out={tmp_path / name}.json"] for name, args in runs.items()]
+    done = run_blocked(f"ARGS = {blocked!r}\n" + BASELINES, "torch", "torchrl", "tensordict")
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip().splitlines()[-1] == "baselines ok"
+    for name, args in runs.items():
+        beside = run_script("evaluate.py", *args, f"out={tmp_path / name}_beside.json")
+        assert beside.returncode == 0, beside.stderr
+        without = json.loads((tmp_path / f"{name}.json").read_text())["summary"]
+        with_torch = json.loads((tmp_path / f"{name}_beside.json").read_text())["summary"]
+        rewards = [[r["reward"] for r in s["results"]] for s in (without, with_torch)]
+        assert rewards[0] == rewards[1] and len(rewards[0]) == int(
+            args[2].removeprefix("episodes=")
+        )
