@@ -214,6 +214,9 @@ class MissionConfig:
         checkpoint: GNN model file (``None``: :func:`mission_model_path`, the shipped model
             chosen for the mission).
         gnn_centralized: One pass over ``state()`` instead of the ready robots' ego-graphs.
+        gnn_spread: Break the GNN's near-ties toward the move that leads away from teammates
+            (``GNNPolicy(spread_margin=...)``, :mod:`agents.spread`; ego-graphs only);
+            ``None``: the plain argmax.
         expert_iterations: PyVRP iterations per expert solve (deterministic plans).
         dynamics: The continuous-time mode (quadrotor, control loop, radii, altitudes, noise).
         out: Output folder.
@@ -231,6 +234,7 @@ class MissionConfig:
     seed: int = 0
     checkpoint: str | None = None
     gnn_centralized: bool = False
+    gnn_spread: float | None = None
     expert_iterations: int = 2000
     dynamics: DynamicsConfig = field(default_factory=DynamicsConfig)
     out: str = "outputs/mission"
@@ -253,6 +257,11 @@ class MissionConfig:
             raise ValueError(f"mission frame_every must be > 0 seconds, got {self.frame_every}")
         if isinstance(self.dynamics, dict):
             self.dynamics = DynamicsConfig.from_dict(self.dynamics)
+        if self.gnn_spread is not None and (self.gnn_centralized or not self.gnn_spread >= 0):
+            raise ValueError(
+                f"mission gnn_spread must be >= 0 and needs gnn_centralized=false, got "
+                f"gnn_spread={self.gnn_spread} gnn_centralized={self.gnn_centralized}"
+            )
         if "gnn" in self.methods and self.checkpoint and not Path(self.checkpoint).is_file():
             raise FileNotFoundError(f"no model file at {self.checkpoint} (checkpoint)")
 
@@ -299,6 +308,8 @@ class MissionConfig:
         elif method == "gnn":
             setup["model_sha256"] = file_sha256(self.gnn_model_path())
             setup["gnn_centralized"] = self.gnn_centralized
+            if self.gnn_spread is not None:  # absent from setups recorded before it existed
+                setup["gnn_spread"] = self.gnn_spread
         elif method == "expert":
             setup["expert_iterations"] = self.expert_iterations
         return setup
@@ -333,7 +344,7 @@ def make_mission_policy(method: str, config: MissionConfig) -> Any:
         from agents.models.policy import GNNPolicy, load_model
 
         model, _ = load_model(config.gnn_model_path())
-        return GNNPolicy(model, centralized=config.gnn_centralized)
+        return GNNPolicy(model, centralized=config.gnn_centralized, spread_margin=config.gnn_spread)
     if method == "expert":
         return MissionExpert(RoutingExpert(max_iterations=config.expert_iterations))
     raise ValueError(f"unknown mission method {method!r}; choose from {MISSION_METHODS}")

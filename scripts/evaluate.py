@@ -24,15 +24,18 @@ Policies: ``greedy`` (each robot on its ego-graph), ``greedy_central`` (same act
 ``expert.clock=false``: over ``hops`` steps even near the end, blind to the clock),
 ``expert_local`` (each robot plans alone over what its ``hops``-hop ego-graph holds,
 ``agents.experts.LocalRoutingExpert``; ``fallback`` with nothing in view),
-``gnn`` (the shipped model of the task, or ``checkpoint=PATH``; each robot on its own ego-graph,
-or ``gnn.centralized=true`` for one pass over ``state()``; argmax actions unless
-``gnn.deterministic=false``, which samples at ``gnn.temperature`` (default 1); comma-separated
-files play as one ensemble, ``agents.models.policy.EnsemblePolicy``). A GNN runs with the
-receptive field it was trained with: ``hops`` defaults to the model's (the largest of an
-ensemble's). ``gnn_rollout``: the one-step rollout policy of that GNN (``agents.rollout``: each
-robot's move is the one whose exact play-out, every robot then on the GNN's argmax, returns
-most; robot by robot, which is never worse than the GNN, or ``gnn.sequential=false`` each
-against the GNN's moves), an omniscient planner, about 22 s an episode on the paper's windows.
+``gnn`` (the shipped model of the task, or ``checkpoint=PATH``; each robot on its own
+ego-graph, or ``gnn.centralized=true`` for one pass over ``state()``; argmax actions unless
+``gnn.deterministic=false``, which samples at ``gnn.temperature`` (default 1);
+``gnn.spread=0.5`` breaks the argmax's near-ties, moves within 0.5 of the best logit, toward
+the one that leads farthest from the nearest teammate in the robot's ego-graph
+(``agents.spread``); comma-separated files play as one ensemble,
+``agents.models.policy.EnsemblePolicy``). A GNN runs with the receptive field it was trained
+with: ``hops`` defaults to the model's (the largest of an ensemble's). ``gnn_rollout``: the
+one-step rollout policy of that GNN (``agents.rollout``: each robot's move is the one whose
+exact play-out, every robot then on the GNN's argmax, returns most; robot by robot, which is
+never worse than the GNN, or ``gnn.sequential=false`` each against the GNN's moves), an
+omniscient planner, about 22 s an episode on the paper's windows.
 Maps: ``city`` (default), ``paper`` (windows of the paper's map), ``paper_full``,
 ``paper_large``, or a grid file. Any other ``key=value`` is a field of ``CoverageConfig``
 (``num_robots=10``, ``max_steps=49``, ...); an unknown key is an error.
@@ -76,6 +79,7 @@ class GNNOptions:
     deterministic: bool = True
     temperature: float = 1.0  # with deterministic=false: sample at this temperature
     sequential: bool = True  # gnn_rollout: robot by robot (False: each against the GNN's moves)
+    spread: float | None = None  # break the argmax's near-ties away from teammates (agents.spread)
 
 
 @dataclass
@@ -155,6 +159,13 @@ def parse_overrides(
             f"gnn.temperature={gnn.temperature}: a sampling temperature (> 0) that needs "
             "gnn.deterministic=false"
         )
+    if gnn.spread is not None and (
+        options.policy != "gnn" or gnn.centralized or not gnn.deterministic or not gnn.spread >= 0
+    ):
+        raise SystemExit(
+            f"gnn.spread={gnn.spread}: a margin >= 0 for policy=gnn on the robots' ego-graphs "
+            "(not with gnn.centralized or gnn.deterministic=false)"
+        )
     if options.policy == "gnn_rollout" and "," in (options.checkpoint or ""):
         raise SystemExit("policy=gnn_rollout plays out one model, not an ensemble")
     if options.policy == "gnn_rollout" and (not gnn.deterministic or gnn.centralized):
@@ -205,12 +216,21 @@ def make_policy(
     if options.policy == "gnn":
         from agents.models.policy import EnsemblePolicy, GNNPolicy
 
-        cls = EnsemblePolicy if isinstance(model, list) else GNNPolicy
-        return cls(
+        if isinstance(model, list):
+            if gnn.spread is not None:
+                raise SystemExit("gnn.spread applies to one model, not an ensemble")
+            return EnsemblePolicy(
+                model,
+                centralized=gnn.centralized,
+                deterministic=gnn.deterministic,
+                temperature=gnn.temperature,
+            )
+        return GNNPolicy(
             model,
             centralized=gnn.centralized,
             deterministic=gnn.deterministic,
             temperature=gnn.temperature,
+            spread_margin=gnn.spread,
         )
     if options.policy == "gnn_rollout":
         from agents.rollout import GNNArgmax, RolloutPolicy

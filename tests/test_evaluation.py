@@ -114,6 +114,9 @@ def test_cli_rejects_unknown_keys() -> None:
         ("checkpoint=README.md policy=gnn", "README.md is not a model file (UnpicklingError"),
         ("checkpoint=missing.pt policy=gnn", "no model file at missing.pt"),
         ("policy=gnn_rollout gnn.deterministic=false", "do not apply to policy=gnn_rollout"),
+        ("policy=gnn gnn.spread=0.5 gnn.centralized=true", "on the robots' ego-graphs"),
+        ("policy=greedy gnn.spread=0.5", "a margin >= 0 for policy=gnn"),
+        ("policy=gnn gnn.spread=-1", "gnn.spread=-1: a margin >= 0"),
     ],
 )
 def test_cli_names_bad_values(argument: str, message: str) -> None:

@@ -106,6 +106,13 @@ def test_mission_config_rejects_unknown_methods_and_keys() -> None:
     assert load(MissionConfig, None, ["checkpoint=nowhere.pt", "methods=[greedy]"]).methods == [
         "greedy"
     ]  # a model file only matters to the GNN
+    for bad in (["gnn_spread=-0.5"], ["gnn_spread=0.5", "gnn_centralized=true"]):
+        with pytest.raises(ValueError, match="gnn_spread must be >= 0 and needs gnn_central"):
+            load(MissionConfig, None, bad)
+    spread = load(MissionConfig, ROOT / "configs/mission.yaml", ["gnn_spread=0.5"])
+    assert make_mission_policy("gnn", spread).spread_margin == 0.5
+    assert spread.setup("gnn")["gnn_spread"] == 0.5  # a resumed run tells the decoding apart
+    assert "gnn_spread" not in config.setup("gnn")  # setups recorded before it still match
 
 
 def test_ego_graphs_span_the_gnn_receptive_field(tmp_path: Path) -> None:

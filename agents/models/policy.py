@@ -37,6 +37,8 @@ from marl_cover.ego import NUM_ACTIONS
 
 #: Keys of a padded graph observation read by the policy.
 GRAPH_KEYS = ("nodes", "edge_index", "edge_attr", "edge_mask", "action_mask")
+#: Keys the spread tie-break (:mod:`agents.spread`) reads.
+SPREAD_KEYS = ("nodes", "node_pos", "node_mask", "edge_index", "edge_mask")
 
 
 class StateLogits(nn.Module):
@@ -227,9 +229,14 @@ class GNNPolicy:
         seed: Seed of the sampling generator (reset with each episode's seed).
         temperature: Divides the logits before sampling (below 1: sharper, toward the argmax
             with near-ties broken at random; see :class:`Tempered`). Unused by the argmax.
+        spread_margin: Break near-ties of the argmax (moves within this much of the best
+            logit) toward the move that leads farthest from the nearest teammate in the robot's
+            ego-graph (:mod:`agents.spread`); ``None``: the plain argmax. Decentralized and
+            deterministic only.
 
     Raises:
-        ValueError: ``temperature`` is not positive.
+        ValueError: ``temperature`` is not positive, or ``spread_margin`` is negative or given
+            with ``centralized`` or sampling.
     """
 
     def __init__(
@@ -239,9 +246,18 @@ class GNNPolicy:
         deterministic: bool = True,
         seed: int = 0,
         temperature: float = 1.0,
+        spread_margin: float | None = None,
     ) -> None:
         if not temperature > 0:
             raise ValueError(f"temperature must be > 0, got {temperature}")
+        if spread_margin is not None and (centralized or not deterministic):
+            raise ValueError(
+                "spread_margin breaks ties of the argmax on each robot's ego-graph: it needs "
+                "centralized=False and deterministic=True"
+            )
+        if spread_margin is not None and not spread_margin >= 0:
+            raise ValueError(f"spread_margin must be >= 0, got {spread_margin}")
+        self.spread_margin = spread_margin
         self.model = model.eval()
         self._dtype = next(model.parameters()).dtype
         self.centralized = centralized
@@ -281,7 +297,17 @@ class GNNPolicy:
 
     def act(self, observations: dict[str, dict[str, np.ndarray]]) -> dict[str, int]:
         """Each robot's action from its own ego-graph (decentralized)."""
-        actions = self._choose(self.logits(observations))
+        logits = self.logits(observations)
+        if self.spread_margin is None:
+            actions = self._choose(logits)
+        else:
+            from agents.spread import spread_actions
+
+            views = {
+                key: np.stack([_entry(observations, a, key) for a in observations])
+                for key in SPREAD_KEYS
+            }
+            actions = spread_actions(logits.numpy(), views, self.spread_margin)
         return dict(zip(observations, actions.tolist(), strict=True))
 
     @torch.inference_mode()
