@@ -216,16 +216,8 @@ def make_policy(
     if options.policy == "gnn":
         from agents.models.policy import EnsemblePolicy, GNNPolicy
 
-        if isinstance(model, list):
-            if gnn.spread is not None:
-                raise SystemExit("gnn.spread applies to one model, not an ensemble")
-            return EnsemblePolicy(
-                model,
-                centralized=gnn.centralized,
-                deterministic=gnn.deterministic,
-                temperature=gnn.temperature,
-            )
-        return GNNPolicy(
+        cls = EnsemblePolicy if isinstance(model, list) else GNNPolicy
+        return cls(
             model,
             centralized=gnn.centralized,
             deterministic=gnn.deterministic,

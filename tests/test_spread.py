@@ -73,7 +73,7 @@ def test_near_ties_go_away_from_the_teammate_by_hops_not_metres(u_graph) -> None
 def test_the_gnn_policy_breaks_its_own_ties(u_graph) -> None:  # noqa: ANN001
     torch = pytest.importorskip("torch")
     from agents.models import AggregationGNN, GNNConfig
-    from agents.models.policy import GNNPolicy
+    from agents.models.policy import EnsemblePolicy, GNNPolicy
 
     torch.manual_seed(0)
     model = AggregationGNN(GNNConfig(kind="nonlinear", hops=4))
@@ -83,6 +83,8 @@ def test_the_gnn_policy_breaks_its_own_ties(u_graph) -> None:  # noqa: ANN001
     logits = policy.logits(observations).numpy()
     expected = spread_actions(logits, env.observe_batch(), margin=1e9)
     assert list(policy.act(observations).values()) == expected.tolist() == [WEST, WEST]
+    ensemble = EnsemblePolicy([model, model], spread_margin=1e9)  # reads the pooled logits
+    assert list(ensemble.act(observations).values()) == [WEST, WEST]
     plain = GNNPolicy(model).act(observations)
     assert list(plain.values()) == logits.argmax(-1).tolist()
     for kwargs in ({"centralized": True}, {"deterministic": False}):

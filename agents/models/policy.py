@@ -330,7 +330,8 @@ class EnsemblePolicy(GNNPolicy):
 
     Args:
         models: The members (any configs; they see the same observations).
-        centralized, deterministic, seed, temperature: As for :class:`GNNPolicy`.
+        centralized, deterministic, seed, temperature, spread_margin: As for
+            :class:`GNNPolicy` (the spread rule reads the pooled logits).
 
     Raises:
         ValueError: no member.
@@ -343,10 +344,11 @@ class EnsemblePolicy(GNNPolicy):
         deterministic: bool = True,
         seed: int = 0,
         temperature: float = 1.0,
+        spread_margin: float | None = None,
     ) -> None:
         if not models:
             raise ValueError("an ensemble needs at least one model")
-        super().__init__(models[0], centralized, deterministic, seed, temperature)
+        super().__init__(models[0], centralized, deterministic, seed, temperature, spread_margin)
         self.members = [GNNPolicy(model) for model in models]
 
     def logits(self, observations: dict[str, dict[str, np.ndarray]]) -> torch.Tensor:
