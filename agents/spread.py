@@ -15,6 +15,8 @@ itself rates the moves about equal. Measured in ``docs/results/mission.md`` (ses
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
+
 import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
@@ -25,7 +27,7 @@ _IS_ROBOT = NODE_FEATURES.index("is_robot")
 _IS_WAYPOINT = NODE_FEATURES.index("is_waypoint")
 
 
-def teammate_distances(observation: dict[str, np.ndarray]) -> np.ndarray:
+def teammate_distances(observation: Mapping[str, np.ndarray]) -> np.ndarray:
     """Hop distance ``(M,)`` from each node of one ego-graph to the nearest teammate in view,
     along waypoint-waypoint edges of the ego-graph (``inf`` where none is reachable, and
     everywhere when no teammate is in view).
@@ -54,15 +56,15 @@ def teammate_distances(observation: dict[str, np.ndarray]) -> np.ndarray:
 
 
 def spread_actions(
-    logits: np.ndarray, observations: dict[str, np.ndarray], margin: float
+    logits: np.ndarray, observations: Sequence[Mapping[str, np.ndarray]], margin: float
 ) -> np.ndarray:
     """Each robot's move ``(R,)``: its argmax, or a near-tied move that leads farther from its
     nearest teammate in view (see the module docstring).
 
     Args:
         logits: Action scores ``(R, 5)``, ``-inf`` for masked actions.
-        observations: The robots' ego-graphs stacked on a leading robot axis (as
-            :meth:`marl_cover.env.CoverageEnv.observe_batch` gives them).
+        observations: Each robot's own ego-graph, in the order of ``logits`` (read only for
+            the robots with a near-tie).
         margin: Moves within this much of the best logit are candidates (``0``: exact ties
             only).
 
@@ -79,9 +81,11 @@ def spread_actions(
         )
         if len(candidates) < 2:
             continue
-        observation = {key: value[i] for key, value in observations.items()}
-        distance = teammate_distances(observation)  # (M,)
-        targets = observation["edge_index"][0, :NUM_ACTIONS]  # action edge k: target -> ego
+        try:
+            distance = teammate_distances(observations[i])  # (M,)
+        except KeyError as error:
+            raise KeyError(f"the observation of robot {i} has no {error.args[0]!r}") from None
+        targets = observations[i]["edge_index"][0, :NUM_ACTIONS]  # action edge k: target -> ego
         spread = distance[targets[candidates]]  # (C,)
         if not np.isfinite(spread).any() or spread[candidates == best][0] == spread.max():
             continue

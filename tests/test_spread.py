@@ -27,24 +27,26 @@ def u_graph() -> SpatialGraph:
     return SpatialGraph.from_edges(positions, [(i, i + 1) for i in range(6)], cell_size=5.0)
 
 
-def views(graph: SpatialGraph, hops: int) -> dict[str, np.ndarray]:
+def views(graph: SpatialGraph, hops: int) -> list[dict[str, np.ndarray]]:
     """Both robots' ego-graphs, robot 0 on waypoint 1 and robot 1 on waypoint 5."""
     env = marl_cover.parallel_env(graph=graph, num_robots=2, hops=hops)
-    env.reset(seed=0, options={"robot_nodes": [1, 5], "interest_nodes": [0, 2, 4, 6]})
-    return env.observe_batch()
+    observations, _ = env.reset(
+        seed=0, options={"robot_nodes": [1, 5], "interest_nodes": [0, 2, 4, 6]}
+    )
+    return list(observations.values())
 
 
 def test_distances_run_along_the_ego_graph_to_the_nearest_teammate(u_graph) -> None:  # noqa: ANN001
     batch = views(u_graph, hops=4)
-    robot_0 = {key: value[0] for key, value in batch.items()}
+    robot_0 = batch[0]
     distance = teammate_distances(robot_0)
     # node 0: the ego robot; 1..6: waypoints 0..5 (6 is five hops away); 7: robot_1 on 5
     assert distance[1:7].tolist() == [5, 4, 3, 2, 1, 0]
     assert np.isinf(distance[[0, 7]]).all() and np.isinf(distance[8:]).all()
-    robot_1 = {key: value[1] for key, value in batch.items()}
+    robot_1 = batch[1]
     # robot_1 sees waypoints 1..6 (0 is five hops away): robot_0 stands on 1
     assert teammate_distances(robot_1)[1:7].tolist() == [0, 1, 2, 3, 4, 5]
-    alone = {key: value[0] for key, value in views(u_graph, hops=3).items()}
+    alone = views(u_graph, hops=3)[0]
     assert np.isinf(teammate_distances(alone)).all()  # robot_1 is four hops away
 
 
@@ -81,7 +83,7 @@ def test_the_gnn_policy_breaks_its_own_ties(u_graph) -> None:  # noqa: ANN001
     observations, _ = env.reset(seed=0, options={"robot_nodes": [1, 5]})
     policy = GNNPolicy(model, spread_margin=1e9)
     logits = policy.logits(observations).numpy()
-    expected = spread_actions(logits, env.observe_batch(), margin=1e9)
+    expected = spread_actions(logits, list(observations.values()), margin=1e9)
     assert list(policy.act(observations).values()) == expected.tolist() == [WEST, WEST]
     ensemble = EnsemblePolicy([model, model], spread_margin=1e9)  # reads the pooled logits
     assert list(ensemble.act(observations).values()) == [WEST, WEST]

@@ -33,12 +33,11 @@ from agents.models.gnn import (
     centralized_logits,
     decentralized_logits,
 )
+from agents.spread import spread_actions
 from marl_cover.ego import NUM_ACTIONS
 
 #: Keys of a padded graph observation read by the policy.
 GRAPH_KEYS = ("nodes", "edge_index", "edge_attr", "edge_mask", "action_mask")
-#: Keys the spread tie-break (:mod:`agents.spread`) reads.
-SPREAD_KEYS = ("nodes", "node_pos", "node_mask", "edge_index", "edge_mask")
 
 
 class StateLogits(nn.Module):
@@ -301,12 +300,7 @@ class GNNPolicy:
         if self.spread_margin is None:
             actions = self._choose(logits)
         else:
-            from agents.spread import spread_actions
-
-            views = {
-                key: np.stack([_entry(observations, a, key) for a in observations])
-                for key in SPREAD_KEYS
-            }
+            views = [observations[a] for a in observations]
             actions = spread_actions(logits.numpy(), views, self.spread_margin)
         return dict(zip(observations, actions.tolist(), strict=True))
 
