@@ -35,7 +35,12 @@ with: ``hops`` defaults to the model's (the largest of an ensemble's). ``gnn_rol
 one-step rollout policy of that GNN (``agents.rollout``: each robot's move is the one whose
 exact play-out, every robot then on the GNN's argmax, returns most; robot by robot, which is
 never worse than the GNN, or ``gnn.sequential=false`` each against the GNN's moves), an
-omniscient planner, about 22 s an episode on the paper's windows.
+omniscient planner, about 22 s an episode on the paper's windows. ``gnn_local_rollout``: the
+decentralized one (``agents.local_rollout``): each robot plays its moves within
+``gnn.margin`` (default 1.0) of its best logit out on its own ego-graph, its teammates in
+view and itself then on the GNN's argmax, for ``gnn.horizon`` steps (default: to the end);
+in exploration the frontier it sees scores as points of interest unless
+``gnn.frontier_as_interest=false``; about 3 s an episode on the paper's windows.
 Maps: ``city`` (default), ``paper`` (windows of the paper's map), ``paper_full``,
 ``paper_large``, or a grid file. Any other ``key=value`` is a field of ``CoverageConfig``
 (``num_robots=10``, ``max_steps=49``, ...); an unknown key is an error.
@@ -58,7 +63,16 @@ from agents.evaluation import evaluate  # noqa: E402
 from marl_cover import CoverageConfig, parallel_env  # noqa: E402
 from marl_cover.config import TASKS, check_field_types  # noqa: E402
 
-POLICIES = ("greedy", "greedy_central", "expert", "expert_rh", "expert_local", "gnn", "gnn_rollout")
+POLICIES = (
+    "greedy",
+    "greedy_central",
+    "expert",
+    "expert_rh",
+    "expert_local",
+    "gnn",
+    "gnn_rollout",
+    "gnn_local_rollout",
+)
 
 
 @dataclass
@@ -80,6 +94,9 @@ class GNNOptions:
     temperature: float = 1.0  # with deterministic=false: sample at this temperature
     sequential: bool = True  # gnn_rollout: robot by robot (False: each against the GNN's moves)
     spread: float | None = None  # break the argmax's near-ties away from teammates (agents.spread)
+    margin: float = 1.0  # gnn_local_rollout: moves within this of the best logit are played out
+    horizon: int | None = None  # gnn_local_rollout: steps of a play-out (None: to the end)
+    frontier_as_interest: bool = True  # gnn_local_rollout, exploration: the frontier scores
 
 
 @dataclass
@@ -166,12 +183,29 @@ def parse_overrides(
             f"gnn.spread={gnn.spread}: a margin >= 0 for policy=gnn on the robots' ego-graphs "
             "(not with gnn.centralized or gnn.deterministic=false)"
         )
-    if options.policy == "gnn_rollout" and "," in (options.checkpoint or ""):
-        raise SystemExit("policy=gnn_rollout plays out one model, not an ensemble")
-    if options.policy == "gnn_rollout" and (not gnn.deterministic or gnn.centralized):
+    rollout = options.policy in ("gnn_rollout", "gnn_local_rollout")
+    if rollout and "," in (options.checkpoint or ""):
+        raise SystemExit(f"policy={options.policy} plays out one model, not an ensemble")
+    if rollout and (not gnn.deterministic or gnn.centralized):
         raise SystemExit(
-            "gnn.deterministic=false and gnn.centralized do not apply to policy=gnn_rollout "
-            "(it plays out the GNN's argmax on the whole state)"
+            f"gnn.deterministic=false and gnn.centralized do not apply to policy={options.policy} "
+            "(it plays out the GNN's argmax)"
+        )
+    default = GNNOptions()
+    planning = ("margin", "horizon", "frontier_as_interest")
+    if options.policy != "gnn_local_rollout" and any(
+        getattr(gnn, name) != getattr(default, name) for name in planning
+    ):
+        raise SystemExit(
+            "gnn.margin, gnn.horizon and gnn.frontier_as_interest apply to "
+            "policy=gnn_local_rollout only"
+        )
+    if options.policy == "gnn_local_rollout" and not (
+        gnn.margin >= 0 and (gnn.horizon is None or gnn.horizon >= 1)
+    ):
+        raise SystemExit(
+            f"policy=gnn_local_rollout needs gnn.margin >= 0 and gnn.horizon >= 1 (or null), "
+            f"got gnn.margin={gnn.margin} gnn.horizon={gnn.horizon}"
         )
     if expert.information != "full" and options.policy == "expert_local":
         raise SystemExit(
@@ -228,6 +262,15 @@ def make_policy(
         from agents.rollout import GNNArgmax, RolloutPolicy
 
         return RolloutPolicy(GNNArgmax(model), sequential=gnn.sequential)
+    if options.policy == "gnn_local_rollout":
+        from agents.local_rollout import LocalRolloutPolicy
+
+        return LocalRolloutPolicy(
+            model,
+            margin=gnn.margin,
+            horizon=gnn.horizon,
+            frontier_as_interest=gnn.frontier_as_interest,
+        )
     if options.policy in ("greedy", "greedy_central"):
         from agents.greedy import CentralizedGreedyPolicy, GreedyPolicy
 

@@ -1,0 +1,189 @@
+"""Decentralized one-step rollout: each robot plays its near-tied moves out on its own ego-graph.
+
+The omniscient rollout policy (:mod:`agents.rollout`) plays moves out on the whole state. Here
+a robot plans with nothing but its observation:
+
+1. Its GNN scores its moves (the shipped network on its own ego-graph, as :class:`GNNPolicy`).
+   The moves whose logit lies within ``margin`` of the best are its candidates; a robot with a
+   single candidate takes it (most decisions: no play-out at all).
+2. Otherwise it builds a world from its ego-graph (:func:`ego_world`): a coverage environment
+   on the waypoints and edges it sees, with the unvisited points of interest it sees, itself
+   and the teammates in view on their waypoints, and as many steps as the team's clock has
+   left (or ``horizon``). In exploration the frontier waypoints it sees also count as points of
+   interest in that world (what lies beyond them is unknown to it).
+3. It plays each candidate out in that world, exactly (:func:`agents.rollout.play_out`): its
+   first move the candidate, its teammates' the GNN's argmax in that world, every robot on
+   the GNN's argmax afterwards. It keeps its argmax unless another candidate returns strictly
+   more, and then takes the best logit among those that return most.
+
+Teammates plan the same way on their own views, at the same time, without communicating: the
+policy is as decentralized as the GNN. The robot's world model is wrong where its view ends
+(teammates beyond it, the map beyond it, in exploration the undiscovered map), and in its
+world it has the collision resolver's first priority. Measured in
+``docs/results/exploration.md`` (session 37).
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from agents.models.policy import GNNPolicy
+from agents.rollout import BasePolicy, GNNArgmax, play_out
+from marl_cover.config import CoverageConfig
+from marl_cover.ego import NODE_FEATURES, NUM_EGO_ACTION_EDGES
+from marl_cover.env import CoverageEnv
+from marl_cover.graph import SpatialGraph
+
+_IS_ROBOT, _IS_WAYPOINT, _IS_INTEREST, _IS_FRONTIER = (
+    NODE_FEATURES.index(name) for name in ("is_robot", "is_waypoint", "is_interest", "is_frontier")
+)
+
+
+def ego_world(
+    observation: Mapping[str, np.ndarray],
+    hops: int,
+    horizon: int | None = None,
+    frontier_as_interest: bool = True,
+) -> CoverageEnv:
+    """A coverage environment, reset, on what one robot's ego-graph holds.
+
+    Robot 0 of the world is the observing robot; robots ``1..`` are its teammates in view, in
+    the order of the ego-graph. Action slots keep their directions, so a move in the world is
+    the same move in the real environment.
+
+    Args:
+        observation: One robot's padded ego-graph with ``steps_left`` (the environment's
+            observation of one agent).
+        hops: Ego-graph radius of the world's robots (the GNN's receptive field).
+        horizon: Most steps the world runs (``None``: as many as the team's clock has left).
+        frontier_as_interest: Count frontier waypoints as points of interest.
+
+    Raises:
+        KeyError: A key of the observation is missing (named).
+    """
+    nodes = observation["nodes"]
+    node_pos = np.asarray(observation["node_pos"], dtype=np.float64)
+    mask = np.asarray(observation["node_mask"], dtype=bool)
+    waypoint = mask & (nodes[:, _IS_WAYPOINT] > 0)
+    ids = np.flatnonzero(waypoint)  # (W,) ego-graph nodes that are waypoints
+    local = np.full(len(nodes), -1, dtype=np.int64)
+    local[ids] = np.arange(len(ids))
+    src, dst = observation["edge_index"]
+    live = np.asarray(observation["edge_mask"], dtype=bool).copy()
+    live[:NUM_EGO_ACTION_EDGES] = False  # the ego robot's own action edges
+    live &= waypoint[src] & waypoint[dst]
+    cell_size = _cell_size(node_pos, src[live], dst[live], observation["edge_attr"][live, 0])
+    once = live & (src < dst)
+    edges = np.column_stack([local[src[once]], local[dst[once]]])  # (E, 2)
+    graph = SpatialGraph.from_edges(node_pos[ids] * cell_size, edges, cell_size)
+    own = local[observation["edge_index"][0, 0]]  # the stay edge: own waypoint -> ego robot
+    teammate = mask & (nodes[:, _IS_ROBOT] > 0)
+    teammate[0] = False
+    at = (node_pos[teammate][:, None, :] == node_pos[ids][None, :, :]).all(axis=-1)  # (T, W)
+    robot_nodes = np.concatenate([[own], at.argmax(axis=1)])  # (1 + T,)
+    interest = nodes[ids, _IS_INTEREST] > 0
+    if frontier_as_interest:
+        interest |= nodes[ids, _IS_FRONTIER] > 0
+    interest[robot_nodes] = False
+    steps = int(observation["steps_left"])
+    if horizon is not None:
+        steps = min(steps, horizon)
+    config = CoverageConfig(
+        graph=graph, num_robots=len(robot_nodes), hops=hops, max_steps=max(steps, 1)
+    )
+    world = CoverageEnv(config)
+    world.reset(
+        seed=0,
+        options={"robot_nodes": robot_nodes, "interest_nodes": np.flatnonzero(interest)},
+    )
+    return world
+
+
+def _cell_size(node_pos: np.ndarray, src: np.ndarray, dst: np.ndarray, metres: np.ndarray) -> float:
+    """Lattice spacing in metres, from an edge's length in cells and in metres (1.0 with no
+    waypoint edge in view: a lone waypoint has no distances to scale)."""
+    if len(src) == 0:
+        return 1.0
+    cells = float(np.linalg.norm(node_pos[src[0]] - node_pos[dst[0]]))
+    return float(metres[0]) / cells
+
+
+class LocalRolloutPolicy(GNNPolicy):
+    """The GNN with each robot's near-tied moves played out on its own ego-graph (see the
+    module docstring).
+
+    Args:
+        model: An :class:`~agents.models.gnn.AggregationGNN`.
+        margin: Moves within this much of the best logit are played out (``0``: exact ties).
+        horizon: Most steps of each play-out (``None``: to the end of the episode).
+        frontier_as_interest: In exploration, count the frontier in view as points of interest.
+        base: The play-outs' policy over the world's states (default: the GNN's argmax,
+            :class:`~agents.rollout.GNNArgmax`).
+
+    Attributes:
+        counts: ``decisions`` (robot decisions), ``played`` (those with a near-tie, played
+            out), ``changed`` (those that left the argmax) and ``play_outs``.
+
+    Raises:
+        ValueError: ``margin`` is negative or ``horizon`` is below 1.
+    """
+
+    def __init__(
+        self,
+        model: Any,
+        margin: float = 1.0,
+        horizon: int | None = None,
+        frontier_as_interest: bool = True,
+        base: BasePolicy | None = None,
+    ) -> None:
+        if not margin >= 0:
+            raise ValueError(f"the rollout margin must be >= 0, got {margin}")
+        if horizon is not None and horizon < 1:
+            raise ValueError(f"the rollout horizon must be >= 1 step, got {horizon}")
+        super().__init__(model)
+        self.margin = float(margin)
+        self.horizon = horizon
+        self.frontier_as_interest = frontier_as_interest
+        self.base = base if base is not None else GNNArgmax(model)
+        self.counts: Counter[str] = Counter()
+
+    def reset(self, seed: int | None = None) -> None:  # noqa: ARG002 (the harness's hook)
+        """Starts an episode: zeroes the counts (the evaluation harness's hook)."""
+        self.counts = Counter()
+
+    def act(self, observations: dict[str, dict[str, np.ndarray]]) -> dict[str, int]:
+        """Each robot's action from its own ego-graph (decentralized)."""
+        logits = self.logits(observations).numpy().astype(np.float64)  # (R, 5)
+        actions = logits.argmax(axis=-1)  # (R,)
+        for i, agent in enumerate(observations):
+            actions[i] = self._decide(logits[i], observations[agent], agent)
+        self.counts["decisions"] += len(actions)
+        return dict(zip(observations, actions.tolist(), strict=True))
+
+    def _decide(self, logits: np.ndarray, observation: Mapping[str, np.ndarray], agent: str) -> int:
+        """One robot's move from its logits ``(5,)`` and its observation."""
+        best = int(logits.argmax())
+        candidates = np.flatnonzero(np.isfinite(logits) & (logits >= logits[best] - self.margin))
+        if len(candidates) < 2:
+            return best
+        try:
+            world = ego_world(
+                observation, self.model.config.hops, self.horizon, self.frontier_as_interest
+            )
+        except KeyError as error:
+            raise KeyError(f"the observation of {agent} has no {error.args[0]!r}") from None
+        joint = np.asarray(self.base([world.state()])[0])  # (1 + T,) the GNN in that world
+        joints = np.repeat(joint[None, :], len(candidates), axis=0)  # (C, 1 + T)
+        joints[:, 0] = candidates
+        returns = play_out(world, self.base, joints)  # (C,)
+        self.counts["played"] += 1
+        self.counts["play_outs"] += len(candidates)
+        if returns.max() <= returns[candidates == best][0]:
+            return best
+        self.counts["changed"] += 1
+        top = candidates[returns == returns.max()]
+        return int(top[np.argmax(logits[top])])
