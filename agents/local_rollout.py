@@ -9,8 +9,9 @@ a robot plans with nothing but its observation:
 2. Otherwise it builds a world from its ego-graph (:func:`ego_world`): a coverage environment
    on the waypoints and edges it sees, with the unvisited points of interest it sees, itself
    and the teammates in view on their waypoints, and as many steps as the team's clock has
-   left (or ``horizon``). In exploration the frontier waypoints it sees also count as points of
-   interest in that world (what lies beyond them is unknown to it).
+   left (or ``horizon``). In exploration that world is what the team has discovered within
+   the robot's view; ``frontier_as_interest`` also scores the frontier waypoints in it (on the
+   windows' selection seeds that changed nothing: session 37).
 3. It plays each candidate out in that world, exactly (:func:`agents.rollout.play_out`): its
    first move the candidate, its teammates' the GNN's argmax in that world, every robot on
    the GNN's argmax afterwards. It keeps its argmax unless another candidate returns strictly
@@ -47,13 +48,14 @@ def ego_world(
     observation: Mapping[str, np.ndarray],
     hops: int,
     horizon: int | None = None,
-    frontier_as_interest: bool = True,
+    frontier_as_interest: bool = False,
 ) -> CoverageEnv:
     """A coverage environment, reset, on what one robot's ego-graph holds.
 
     Robot 0 of the world is the observing robot; robots ``1..`` are its teammates in view, in
-    the order of the ego-graph. Action slots keep their directions, so a move in the world is
-    the same move in the real environment.
+    the order of the ego-graph (one robot per waypoint: a teammate snapped to a waypoint that
+    an earlier robot holds, as happens in continuous time, is left out). Action slots keep
+    their directions, so a move in the world is the same move in the real environment.
 
     Args:
         observation: One robot's padded ego-graph with ``steps_left`` (the environment's
@@ -85,6 +87,10 @@ def ego_world(
     teammate[0] = False
     at = (node_pos[teammate][:, None, :] == node_pos[ids][None, :, :]).all(axis=-1)  # (T, W)
     robot_nodes = np.concatenate([[own], at.argmax(axis=1)])  # (1 + T,)
+    # In continuous time two robots can snap to one waypoint: the world keeps the first
+    # (the observing robot before its teammates), as the discrete environment holds one.
+    _, first = np.unique(robot_nodes, return_index=True)
+    robot_nodes = robot_nodes[np.sort(first)]
     interest = nodes[ids, _IS_INTEREST] > 0
     if frontier_as_interest:
         interest |= nodes[ids, _IS_FRONTIER] > 0
@@ -137,7 +143,7 @@ class LocalRolloutPolicy(GNNPolicy):
         model: Any,
         margin: float = 1.0,
         horizon: int | None = None,
-        frontier_as_interest: bool = True,
+        frontier_as_interest: bool = False,
         base: BasePolicy | None = None,
     ) -> None:
         if not margin >= 0:

@@ -217,6 +217,11 @@ class MissionConfig:
         gnn_spread: Break the GNN's near-ties toward the move that leads away from teammates
             (``GNNPolicy(spread_margin=...)``, :mod:`agents.spread`; ego-graphs only);
             ``None``: the plain argmax.
+        gnn_rollout: Play the GNN's near-tied moves (within this margin of the best logit) out
+            on each ready robot's ego-graph and take the best (:mod:`agents.local_rollout`, a
+            decentralized planner on top of the GNN); ``None``: off.
+        gnn_rollout_horizon: Moves of each such play-out (the world is the discrete
+            environment on the robot's ego-graph).
         expert_iterations: PyVRP iterations per expert solve (deterministic plans).
         dynamics: The continuous-time mode (quadrotor, control loop, radii, altitudes, noise).
         out: Output folder.
@@ -235,6 +240,8 @@ class MissionConfig:
     checkpoint: str | None = None
     gnn_centralized: bool = False
     gnn_spread: float | None = None
+    gnn_rollout: float | None = None
+    gnn_rollout_horizon: int = 20
     expert_iterations: int = 2000
     dynamics: DynamicsConfig = field(default_factory=DynamicsConfig)
     out: str = "outputs/mission"
@@ -261,6 +268,18 @@ class MissionConfig:
             raise ValueError(
                 f"mission gnn_spread must be >= 0 and needs gnn_centralized=false, got "
                 f"gnn_spread={self.gnn_spread} gnn_centralized={self.gnn_centralized}"
+            )
+        if self.gnn_rollout is not None and (
+            self.gnn_centralized
+            or self.gnn_spread is not None
+            or not self.gnn_rollout >= 0
+            or self.gnn_rollout_horizon < 1
+        ):
+            raise ValueError(
+                f"mission gnn_rollout must be >= 0 with gnn_rollout_horizon >= 1, on ego-graphs "
+                f"and without gnn_spread; got gnn_rollout={self.gnn_rollout} "
+                f"gnn_rollout_horizon={self.gnn_rollout_horizon} "
+                f"gnn_centralized={self.gnn_centralized} gnn_spread={self.gnn_spread}"
             )
         if "gnn" in self.methods and self.checkpoint and not Path(self.checkpoint).is_file():
             raise FileNotFoundError(f"no model file at {self.checkpoint} (checkpoint)")
@@ -310,6 +329,9 @@ class MissionConfig:
             setup["gnn_centralized"] = self.gnn_centralized
             if self.gnn_spread is not None:  # absent from setups recorded before it existed
                 setup["gnn_spread"] = self.gnn_spread
+            if self.gnn_rollout is not None:
+                setup["gnn_rollout"] = self.gnn_rollout
+                setup["gnn_rollout_horizon"] = self.gnn_rollout_horizon
         elif method == "expert":
             setup["expert_iterations"] = self.expert_iterations
         return setup
@@ -344,6 +366,12 @@ def make_mission_policy(method: str, config: MissionConfig) -> Any:
         from agents.models.policy import GNNPolicy, load_model
 
         model, _ = load_model(config.gnn_model_path())
+        if config.gnn_rollout is not None:
+            from agents.local_rollout import LocalRolloutPolicy
+
+            return LocalRolloutPolicy(
+                model, margin=config.gnn_rollout, horizon=config.gnn_rollout_horizon
+            )
         return GNNPolicy(model, centralized=config.gnn_centralized, spread_margin=config.gnn_spread)
     if method == "expert":
         return MissionExpert(RoutingExpert(max_iterations=config.expert_iterations))

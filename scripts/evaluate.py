@@ -39,8 +39,9 @@ omniscient planner, about 22 s an episode on the paper's windows. ``gnn_local_ro
 decentralized one (``agents.local_rollout``): each robot plays its moves within
 ``gnn.margin`` (default 1.0) of its best logit out on its own ego-graph, its teammates in
 view and itself then on the GNN's argmax, for ``gnn.horizon`` steps (default: to the end);
-in exploration the frontier it sees scores as points of interest unless
-``gnn.frontier_as_interest=false``; about 3 s an episode on the paper's windows.
+in exploration it plays on the discovered waypoints in view, and
+``gnn.frontier_as_interest=true`` also scores the frontier there; about 3 s an episode on the
+paper's windows.
 Maps: ``city`` (default), ``paper`` (windows of the paper's map), ``paper_full``,
 ``paper_large``, or a grid file. Any other ``key=value`` is a field of ``CoverageConfig``
 (``num_robots=10``, ``max_steps=49``, ...); an unknown key is an error.
@@ -96,7 +97,7 @@ class GNNOptions:
     spread: float | None = None  # break the argmax's near-ties away from teammates (agents.spread)
     margin: float = 1.0  # gnn_local_rollout: moves within this of the best logit are played out
     horizon: int | None = None  # gnn_local_rollout: steps of a play-out (None: to the end)
-    frontier_as_interest: bool = True  # gnn_local_rollout, exploration: the frontier scores
+    frontier_as_interest: bool = False  # gnn_local_rollout, exploration: the frontier scores
 
 
 @dataclass

@@ -84,6 +84,12 @@ def test_the_world_holds_exactly_what_the_robot_sees() -> None:
         (0, 1),
     }
     assert seen.max_steps == 8 and seen.num_steps == 0  # the team's clock: 9 - 1 steps left
+    # a teammate snapped onto the robot's own waypoint (continuous time) is left out
+    crowded = dict(observations["robot_0"])
+    teammate = np.flatnonzero(crowded["node_mask"] & (crowded["nodes"][:, 0] > 0))[1]
+    crowded["node_pos"] = crowded["node_pos"].copy()
+    crowded["node_pos"][teammate] = 0.0
+    assert len(ego_world(crowded, hops=3).snapshot().robot_node) == 1
     assert ego_world(observations["robot_0"], hops=3, horizon=5).snapshot().max_steps == 5
 
     # the world shows robot 0 the same ego-graph: same nodes, positions and edges
@@ -111,17 +117,17 @@ def test_the_world_holds_exactly_what_the_robot_sees() -> None:
 
 def test_frontier_counts_as_interest_in_exploration() -> None:
     """A 6 x 1 corridor, sensor 5 m: from waypoint 0 the team knows 0 and 1, and 1 is the
-    frontier; the world gives it a point unless told not to."""
+    frontier; the world gives it a point when told to."""
     graph = lattice(6, 1)
     env = marl_cover.parallel_env(
         graph=graph, num_robots=1, hops=5, task="exploration", sensor_range=5.0
     )
     observations, _ = env.reset(seed=0, options={"robot_nodes": [0], "interest_nodes": [4]})
-    world = ego_world(observations["robot_0"], hops=5).snapshot()
+    world = ego_world(observations["robot_0"], hops=5, frontier_as_interest=True).snapshot()
     assert world.graph.num_nodes == 2
     assert world.unvisited_interest.tolist() == [False, True]
-    blind = ego_world(observations["robot_0"], hops=5, frontier_as_interest=False).snapshot()
-    assert not blind.unvisited_interest.any()
+    plain = ego_world(observations["robot_0"], hops=5).snapshot()
+    assert plain.graph.num_nodes == 2 and not plain.unvisited_interest.any()
 
 
 class FixedLogits(LocalRolloutPolicy):
@@ -214,6 +220,15 @@ def test_cli_plays_the_decentralized_rollout(tmp_path) -> None:
         ("zero", ["policy=gnn_local_rollout", "gnn.margin=0"]),
         ("wide", ["policy=gnn_local_rollout", "gnn.margin=100", "gnn.horizon=4"]),
         ("explore", ["policy=gnn_local_rollout", "task=exploration", "gnn.margin=100"]),
+        (
+            "frontier",
+            [
+                "policy=gnn_local_rollout",
+                "task=exploration",
+                "gnn.margin=100",
+                "gnn.frontier_as_interest=true",
+            ],
+        ),
     ):
         out = tmp_path / f"{name}.json"
         result = run_script("evaluate.py", *common, *extra, f"out={out}")
@@ -223,7 +238,7 @@ def test_cli_plays_the_decentralized_rollout(tmp_path) -> None:
     assert rewards["zero"] == rewards["gnn"]
     assert records["zero"]["policy_counts"]["decisions"] == 2 * 8 * 3
     assert "played" not in records["zero"]["policy_counts"]
-    for name in ("wide", "explore"):
+    for name in ("wide", "explore", "frontier"):
         counts = records[name]["policy_counts"]
         assert counts["decisions"] == 2 * 8 * 3 and 0 < counts["played"] <= counts["decisions"]
         assert 2 * counts["played"] <= counts["play_outs"] <= 5 * counts["played"]

@@ -113,6 +113,20 @@ def test_mission_config_rejects_unknown_methods_and_keys() -> None:
     assert make_mission_policy("gnn", spread).spread_margin == 0.5
     assert spread.setup("gnn")["gnn_spread"] == 0.5  # a resumed run tells the decoding apart
     assert "gnn_spread" not in config.setup("gnn")  # setups recorded before it still match
+    for bad in (
+        ["gnn_rollout=-1"],
+        ["gnn_rollout=1", "gnn_rollout_horizon=0"],
+        ["gnn_rollout=1", "gnn_centralized=true"],
+        ["gnn_rollout=1", "gnn_spread=0.5"],
+    ):
+        with pytest.raises(ValueError, match="gnn_rollout must be >= 0 with gnn_rollout_hor"):
+            load(MissionConfig, None, bad)
+    planned = load(MissionConfig, ROOT / "configs/mission.yaml", ["gnn_rollout=1.5"])
+    policy = make_mission_policy("gnn", planned)
+    assert (policy.margin, policy.horizon) == (1.5, 20)
+    assert planned.setup("gnn")["gnn_rollout"] == 1.5
+    assert planned.setup("gnn")["gnn_rollout_horizon"] == 20
+    assert "gnn_rollout" not in config.setup("gnn")
 
 
 def test_ego_graphs_span_the_gnn_receptive_field(tmp_path: Path) -> None:
@@ -198,3 +212,23 @@ def test_bench_mission_reports_each_flight(tmp_path: Path) -> None:
         rows[1]["mission_seconds"],
         rows[1]["decisions"],
     )
+
+
+def test_the_decentralized_rollout_flies_the_mission() -> None:
+    """On the quadrotors the rollout plans on each ready robot's ego-graph: margin 0 flies the
+    GNN's mission, a wide margin plays moves out (``steps_left`` is the nominal
+    clock) and changes some of them."""
+    import torch
+
+    from agents.local_rollout import LocalRolloutPolicy
+    from agents.models.gnn import AggregationGNN, GNNConfig
+    from agents.models.policy import GNNPolicy
+
+    torch.manual_seed(0)
+    model = AggregationGNN(GNNConfig(hops=6, hidden=8))
+    plain = run_mission(small_env(30.0), GNNPolicy(model), seed=4)
+    tied = run_mission(small_env(30.0), LocalRolloutPolicy(model, margin=0.0), seed=4)
+    # exact ties are played out too (one here), and none of them changed a move
+    assert tied.visited == plain.visited and "changed" not in tied.policy_counts
+    wide = run_mission(small_env(30.0), LocalRolloutPolicy(model, margin=100.0, horizon=3), seed=4)
+    assert wide.policy_counts["played"] > 0 and wide.policy_counts["changed"] > 0
