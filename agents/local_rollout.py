@@ -66,6 +66,7 @@ def ego_world(
 
     Raises:
         KeyError: A key of the observation is missing (named).
+        ValueError: A teammate in the ego-graph stands on none of its waypoints.
     """
     nodes = observation["nodes"]
     node_pos = np.asarray(observation["node_pos"], dtype=np.float64)
@@ -86,6 +87,9 @@ def ego_world(
     teammate = mask & (nodes[:, _IS_ROBOT] > 0)
     teammate[0] = False
     at = (node_pos[teammate][:, None, :] == node_pos[ids][None, :, :]).all(axis=-1)  # (T, W)
+    if not at.any(axis=1).all():
+        node = int(np.flatnonzero(teammate)[np.flatnonzero(~at.any(axis=1))[0]])
+        raise ValueError(f"robot node {node} of the ego-graph stands on none of its waypoints")
     robot_nodes = np.concatenate([[own], at.argmax(axis=1)])  # (1 + T,)
     # In continuous time two robots can snap to one waypoint: the world keeps the first
     # (the observing robot before its teammates), as the discrete environment holds one.

@@ -90,6 +90,9 @@ def test_the_world_holds_exactly_what_the_robot_sees() -> None:
     crowded["node_pos"] = crowded["node_pos"].copy()
     crowded["node_pos"][teammate] = 0.0
     assert len(ego_world(crowded, hops=3).snapshot().robot_node) == 1
+    crowded["node_pos"][teammate] = 0.5  # between waypoints: not an observation of this env
+    with pytest.raises(ValueError, match=f"robot node {teammate} of the ego-graph stands on none"):
+        ego_world(crowded, hops=3)
     assert ego_world(observations["robot_0"], hops=3, horizon=5).snapshot().max_steps == 5
 
     # the world shows robot 0 the same ego-graph: same nodes, positions and edges
