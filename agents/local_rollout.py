@@ -137,6 +137,10 @@ class LocalRolloutPolicy(GNNPolicy):
     Attributes:
         counts: ``decisions`` (robot decisions), ``played`` (those with a near-tie, played
             out), ``changed`` (those that left the argmax) and ``play_outs``.
+        accept: After :meth:`act`: ``(R,)`` bit masks of the moves that returned as much as the
+            chosen one (bit ``a`` for action ``a``; the chosen move alone where nothing was
+            played out), as the routing experts and :class:`~agents.rollout.RolloutPolicy`
+            record them for imitation.
 
     Raises:
         ValueError: ``margin`` is negative or ``horizon`` is below 1.
@@ -160,6 +164,7 @@ class LocalRolloutPolicy(GNNPolicy):
         self.frontier_as_interest = frontier_as_interest
         self.base = base if base is not None else GNNArgmax(model)
         self.counts: Counter[str] = Counter()
+        self.accept = np.zeros(0, dtype=np.int64)
 
     def reset(self, seed: int | None = None) -> None:  # noqa: ARG002 (the harness's hook)
         """Starts an episode: zeroes the counts (the evaluation harness's hook)."""
@@ -169,17 +174,31 @@ class LocalRolloutPolicy(GNNPolicy):
         """Each robot's action from its own ego-graph (decentralized)."""
         logits = self.logits(observations).numpy().astype(np.float64)  # (R, 5)
         actions = logits.argmax(axis=-1)  # (R,)
+        self.accept = np.zeros(len(actions), dtype=np.int64)
         for i, agent in enumerate(observations):
-            actions[i] = self._decide(logits[i], observations[agent], agent)
+            actions[i], self.accept[i] = self._decide(logits[i], observations[agent], agent)
         self.counts["decisions"] += len(actions)
         return dict(zip(observations, actions.tolist(), strict=True))
 
-    def _decide(self, logits: np.ndarray, observation: Mapping[str, np.ndarray], agent: str) -> int:
-        """One robot's move from its logits ``(5,)`` and its observation."""
+    def improve(self, env: CoverageEnv) -> np.ndarray:
+        """Every robot's move ``(R,)`` at the environment's current state, each from its own
+        observation (the labeller's interface of :mod:`agents.rollout_labels`)."""
+        batch = env.observe_batch()
+        observations = {
+            agent: {key: value[i] for key, value in batch.items()}
+            for i, agent in enumerate(env.possible_agents)
+        }
+        return np.array(list(self.act(observations).values()), dtype=np.int64)
+
+    def _decide(
+        self, logits: np.ndarray, observation: Mapping[str, np.ndarray], agent: str
+    ) -> tuple[int, int]:
+        """One robot's move from its logits ``(5,)`` and its observation, and the bit mask of
+        the moves that returned as much."""
         best = int(logits.argmax())
         candidates = np.flatnonzero(np.isfinite(logits) & (logits >= logits[best] - self.margin))
         if len(candidates) < 2:
-            return best
+            return best, 1 << best
         try:
             world = ego_world(
                 observation, self.model.config.hops, self.horizon, self.frontier_as_interest
@@ -192,8 +211,9 @@ class LocalRolloutPolicy(GNNPolicy):
         returns = play_out(world, self.base, joints)  # (C,)
         self.counts["played"] += 1
         self.counts["play_outs"] += len(candidates)
-        if returns.max() <= returns[candidates == best][0]:
-            return best
-        self.counts["changed"] += 1
         top = candidates[returns == returns.max()]
-        return int(top[np.argmax(logits[top])])
+        accept = sum(1 << int(a) for a in top)
+        if returns.max() <= returns[candidates == best][0]:
+            return best, accept
+        self.counts["changed"] += 1
+        return int(top[np.argmax(logits[top])]), accept

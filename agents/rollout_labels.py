@@ -42,8 +42,12 @@ class RolloutLabelConfig:
         shard_size: Episodes per shard.
         sequential: Label robot by robot (:class:`~agents.rollout.RolloutPolicy`) instead of
             each robot's best deviation from the learner's joint action.
-        labels: ``"rollout"``, or ``"own"``: the learner's own moves as labels (a control:
-            training on those measures what retraining alone does to the learner).
+        labels: ``"rollout"``, ``"own"``: the learner's own moves as labels (a control:
+            training on those measures what retraining alone does to the learner), or
+            ``"local"``: the decentralized rollout's moves, each robot playing its near-ties
+            out on its own ego-graph (:class:`~agents.local_rollout.LocalRolloutPolicy`,
+            ``margin``; a function of what the learner sees).
+        margin: ``labels="local"``: moves within this much of the best logit are played out.
         beta: Probability that a robot makes its labelled move instead of the learner's at a
             step (DAgger's mixing, drawn from a generator seeded with the episode's seed);
             ``1`` with ``sequential``: the episodes of the rollout policy itself.
@@ -60,6 +64,7 @@ class RolloutLabelConfig:
     shard_size: int = 5
     sequential: bool = False
     labels: str = "rollout"
+    margin: float = 1.0
     beta: float = 0.0
     env: dict[str, Any] = field(default_factory=lambda: {"map": "paper"})
     out: str = "outputs/rollout_labels"
@@ -72,8 +77,10 @@ class RolloutLabelConfig:
             raise ValueError(
                 f"episodes and shard_size must be >= 1, got {self.episodes} and {self.shard_size}"
             )
-        if self.labels not in ("rollout", "own"):
-            raise ValueError(f"labels must be 'rollout' or 'own', got {self.labels!r}")
+        if self.labels not in ("rollout", "own", "local"):
+            raise ValueError(f"labels must be 'rollout', 'own' or 'local', got {self.labels!r}")
+        if not self.margin >= 0:
+            raise ValueError(f"margin must be >= 0, got {self.margin}")
         if not 0.0 <= self.beta <= 1.0:
             raise ValueError(f"beta must be in [0, 1], got {self.beta}")
         if "task" in self.env:
@@ -91,7 +98,7 @@ class RolloutLabelConfig:
 def record_rollout_episode(
     env: CoverageEnv,
     learner: GNNArgmax,
-    rollout: RolloutPolicy | None,
+    rollout: Any,
     seed: int,
     beta: float = 0.0,
 ) -> tuple[Episode, dict[str, Any]]:
@@ -155,7 +162,13 @@ def collect_rollout_labels(config: RolloutLabelConfig) -> dict[str, Any]:
     env_options = {"hops": model.config.hops, **config.env, "task": config.task}
     env = marl_cover.parallel_env(**env_options)
     learner = GNNArgmax(model)
-    rollout = RolloutPolicy(learner, config.sequential) if config.labels == "rollout" else None
+    rollout: Any = None
+    if config.labels == "rollout":
+        rollout = RolloutPolicy(learner, config.sequential)
+    elif config.labels == "local":
+        from agents.local_rollout import LocalRolloutPolicy
+
+        rollout = LocalRolloutPolicy(model, margin=config.margin)
 
     def record_one(seed: int) -> tuple[Episode, dict[str, Any]]:
         started = time.perf_counter()

@@ -7,7 +7,9 @@
 Each robot's label is the move that returns most when it alone leaves the GNN's move for one
 step and every robot follows the GNN to the end of the episode (exact play-outs on copies of the
 environment, ``agents.rollout``). ``sequential=true`` labels robot by robot (the rollout
-policy's own moves), ``labels=own`` with the GNN's own moves (a control for retraining), and
+policy's own moves), ``labels=own`` with the GNN's own moves (a control for retraining),
+``labels=local`` with the decentralized rollout's moves (``agents.local_rollout``: each robot
+plays its moves within ``margin`` of its best logit out on its own ego-graph), and
 ``beta`` plays the labels instead of the GNN's moves with that probability.
 
 Writes ``OUT/shard_NNNNN.npz`` (``shard_size`` episodes each, atomically, with a ``.json`` of

@@ -245,3 +245,36 @@ def test_cli_plays_the_decentralized_rollout(tmp_path) -> None:
         counts = records[name]["policy_counts"]
         assert counts["decisions"] == 2 * 8 * 3 and 0 < counts["played"] <= counts["decisions"]
         assert 2 * counts["played"] <= counts["play_outs"] <= 5 * counts["played"]
+
+
+def test_local_labels_are_the_policys_moves_on_the_learners_states() -> None:
+    """``labels=local``: each state of the learner's own episode is labelled with the moves
+    the decentralized rollout makes from the robots' observations there, and each label is
+    among its accepted moves."""
+    from agents.rollout import GNNArgmax
+    from agents.rollout_labels import record_rollout_episode
+
+    torch.manual_seed(5)
+    model = AggregationGNN(GNNConfig(kind="nonlinear", hops=3)).double()
+    env = marl_cover.parallel_env(num_robots=3, hops=3, max_steps=6, city_size=60)
+    labeller = LocalRolloutPolicy(model, margin=100.0)
+    episode, counts = record_rollout_episode(env, GNNArgmax(model), labeller, seed=3)
+    own_episode, _ = record_rollout_episode(env, GNNArgmax(model), None, seed=3)
+    np.testing.assert_array_equal(episode.robot_node, own_episode.robot_node)  # learner's states
+    env.reset(seed=3)
+    check = LocalRolloutPolicy(model, margin=100.0)
+    changed = 0
+    for step in range(episode.num_steps):
+        observations = env.observe_batch()
+        per_agent = {
+            agent: {key: value[i] for key, value in observations.items()}
+            for i, agent in enumerate(env.possible_agents)
+        }
+        label = np.array(list(check.act(per_agent).values()))
+        np.testing.assert_array_equal(episode.actions[step], label)
+        accept = episode.accept[step].astype(np.int64)
+        assert ((accept >> label) & 1).all()
+        own = own_episode.actions[step]
+        changed += int((label != own).sum())
+        env.apply_actions(own)
+    assert counts["changed"] == changed > 0

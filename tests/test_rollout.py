@@ -226,7 +226,9 @@ def test_own_labels_are_the_learners_moves() -> None:
         np.testing.assert_array_equal(episode.accept[step], 1 << own)
         env.apply_actions(own)
     assert counts["changed"] == 0
-    with pytest.raises(ValueError, match="labels must be 'rollout' or 'own'"):
+    with pytest.raises(ValueError, match="labels must be 'rollout', 'own' or 'local'"):
         RolloutLabelConfig(labels="expert")
+    with pytest.raises(ValueError, match="margin must be >= 0, got -1"):
+        RolloutLabelConfig(labels="local", margin=-1.0)
     with pytest.raises(FileNotFoundError, match=r"no model file at nowhere.pt \(checkpoint\)"):
         RolloutLabelConfig(checkpoint="nowhere.pt")
