@@ -34,13 +34,14 @@ import numpy as np
 
 from agents.models.policy import GNNPolicy
 from agents.rollout import BasePolicy, GNNArgmax, play_out
+from agents.spread import teammate_waypoints
 from marl_cover.config import CoverageConfig
 from marl_cover.ego import NODE_FEATURES, NUM_EGO_ACTION_EDGES
 from marl_cover.env import CoverageEnv
 from marl_cover.graph import SpatialGraph
 
-_IS_ROBOT, _IS_WAYPOINT, _IS_INTEREST, _IS_FRONTIER = (
-    NODE_FEATURES.index(name) for name in ("is_robot", "is_waypoint", "is_interest", "is_frontier")
+_IS_WAYPOINT, _IS_INTEREST, _IS_FRONTIER = (
+    NODE_FEATURES.index(name) for name in ("is_waypoint", "is_interest", "is_frontier")
 )
 
 
@@ -84,11 +85,10 @@ def ego_world(
     edges = np.column_stack([local[src[once]], local[dst[once]]])  # (E, 2)
     graph = SpatialGraph.from_edges(node_pos[ids] * cell_size, edges, cell_size)
     own = local[observation["edge_index"][0, 0]]  # the stay edge: own waypoint -> ego robot
-    teammate = mask & (nodes[:, _IS_ROBOT] > 0)
-    teammate[0] = False
-    at = (node_pos[teammate][:, None, :] == node_pos[ids][None, :, :]).all(axis=-1)  # (T, W)
+    teammates, on = teammate_waypoints(observation)  # (T,), (T, M)
+    at = on[:, ids]  # (T, W)
     if not at.any(axis=1).all():
-        node = int(np.flatnonzero(teammate)[np.flatnonzero(~at.any(axis=1))[0]])
+        node = int(teammates[np.flatnonzero(~at.any(axis=1))[0]])
         raise ValueError(f"robot node {node} of the ego-graph stands on none of its waypoints")
     robot_nodes = np.concatenate([[own], at.argmax(axis=1)])  # (1 + T,)
     # In continuous time two robots can snap to one waypoint: the world keeps the first
@@ -183,12 +183,7 @@ class LocalRolloutPolicy(GNNPolicy):
     def improve(self, env: CoverageEnv) -> np.ndarray:
         """Every robot's move ``(R,)`` at the environment's current state, each from its own
         observation (the labeller's interface of :mod:`agents.rollout_labels`)."""
-        batch = env.observe_batch()
-        observations = {
-            agent: {key: value[i] for key, value in batch.items()}
-            for i, agent in enumerate(env.possible_agents)
-        }
-        return np.array(list(self.act(observations).values()), dtype=np.int64)
+        return np.array(list(self.act(env.observations()).values()), dtype=np.int64)
 
     def _decide(
         self, logits: np.ndarray, observation: Mapping[str, np.ndarray], agent: str

@@ -27,6 +27,26 @@ _IS_ROBOT = NODE_FEATURES.index("is_robot")
 _IS_WAYPOINT = NODE_FEATURES.index("is_waypoint")
 
 
+def teammate_waypoints(observation: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """The teammates in one ego-graph and the waypoints they stand on.
+
+    Args:
+        observation: One robot's padded ego-graph (``nodes``, ``node_pos``, ``node_mask``);
+            node 0 is the ego robot.
+
+    Returns:
+        The teammates' robot nodes ``(T,)`` and ``(T, M)`` bool: ``True`` at the waypoint node
+        in the same position as teammate ``t`` (a teammate stands on its waypoint).
+    """
+    nodes, mask = observation["nodes"], np.asarray(observation["node_mask"], dtype=bool)
+    robot = mask & (nodes[:, _IS_ROBOT] > 0)
+    robot[0] = False  # the ego robot is no teammate
+    waypoint = mask & (nodes[:, _IS_WAYPOINT] > 0)
+    positions = observation["node_pos"]
+    on = (positions[None, :, :] == positions[robot][:, None, :]).all(axis=-1) & waypoint
+    return np.flatnonzero(robot), on
+
+
 def teammate_distances(observation: Mapping[str, np.ndarray]) -> np.ndarray:
     """Hop distance ``(M,)`` from each node of one ego-graph to the nearest teammate in view,
     along waypoint-waypoint edges of the ego-graph (``inf`` where none is reachable, and
@@ -38,15 +58,11 @@ def teammate_distances(observation: Mapping[str, np.ndarray]) -> np.ndarray:
     """
     nodes, mask = observation["nodes"], np.asarray(observation["node_mask"], dtype=bool)
     num_nodes = len(nodes)
-    robot = mask & (nodes[:, _IS_ROBOT] > 0)
-    robot[0] = False  # the ego robot is no teammate
-    if not robot.any():
+    teammates, on = teammate_waypoints(observation)  # (T,), (T, M)
+    if not len(teammates):
         return np.full(num_nodes, np.inf)
     waypoint = mask & (nodes[:, _IS_WAYPOINT] > 0)
-    positions = observation["node_pos"]
-    teammate_pos = positions[robot]  # (T, 2)
-    same = (positions[None, :, :] == teammate_pos[:, None, :]).all(axis=-1) & waypoint  # (T, M)
-    sources = np.flatnonzero(same.any(axis=0))
+    sources = np.flatnonzero(on.any(axis=0))
     src, dst = observation["edge_index"]
     live = np.asarray(observation["edge_mask"], dtype=bool) & waypoint[src] & waypoint[dst]
     graph = csr_matrix(

@@ -339,7 +339,7 @@ class QuadrotorCoverageEnv(CoverageEnv):
         self._arrived = np.ones(r, dtype=bool)
         zeros = np.zeros(r, dtype=np.int64)
         infos = self._continuous_infos(zeros, zeros.astype(bool), zeros.astype(bool))
-        return self._observe(), infos
+        return self.observations(), infos
 
     def step(self, actions: dict[str, Any]) -> StepResult:
         """Applies the ready robots' actions, then flies until a robot is ready again

@@ -289,7 +289,7 @@ class CoverageEnv(ParallelEnv):
         self._start_episode(seed, options)
         zeros = np.zeros(self.config.num_robots, dtype=np.int64)
         infos = self._infos(zeros, zeros.astype(bool), zeros.astype(bool))
-        return self._observe(), infos
+        return self.observations(), infos
 
     def _start_episode(self, seed: int | None, options: dict[str, Any] | None) -> None:
         """The draws and the episode state of :meth:`reset`, without building observations
@@ -432,7 +432,7 @@ class CoverageEnv(ParallelEnv):
         termination, truncation and ``infos``."""
         reward = float(new_interest.sum())
         return (
-            self._observe(),
+            self.observations(),
             dict.fromkeys(agents, reward),
             dict.fromkeys(agents, terminated),
             dict.fromkeys(agents, truncated),
@@ -519,7 +519,9 @@ class CoverageEnv(ParallelEnv):
             for i, agent in enumerate(self.possible_agents)
         }
 
-    def _observe(self) -> dict[str, dict[str, np.ndarray]]:
+    def observations(self) -> dict[str, dict[str, np.ndarray]]:
+        """Every robot's observation keyed by agent, as ``reset`` and ``step`` return them
+        (fresh arrays)."""
         batch = self.observe_batch()
         return {
             agent: {key: value[i, ...] for key, value in batch.items()}  # steps_left: 0-d

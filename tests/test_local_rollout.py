@@ -265,12 +265,7 @@ def test_local_labels_are_the_policys_moves_on_the_learners_states() -> None:
     check = LocalRolloutPolicy(model, margin=100.0)
     changed = 0
     for step in range(episode.num_steps):
-        observations = env.observe_batch()
-        per_agent = {
-            agent: {key: value[i] for key, value in observations.items()}
-            for i, agent in enumerate(env.possible_agents)
-        }
-        label = np.array(list(check.act(per_agent).values()))
+        label = np.array(list(check.act(env.observations()).values()))
         np.testing.assert_array_equal(episode.actions[step], label)
         accept = episode.accept[step].astype(np.int64)
         assert ((accept >> label) & 1).all()
