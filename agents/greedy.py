@@ -25,7 +25,12 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from marl_cover.ego import NODE_FEATURES
+from marl_cover.ego import NODE_FEATURES, NUM_ACTIONS
+
+try:  # the compiled play-out of greedy_return (optional dependency numba)
+    from agents._greedy_numba import greedy_play_out as _compiled_play_out
+except ImportError:  # pragma: no cover - numba is installed in CI
+    _compiled_play_out = None  # type: ignore[assignment]
 
 FALLBACKS = ("stay", "random")
 #: Node-feature columns of a target: an unvisited point of interest or a frontier waypoint.
@@ -158,3 +163,107 @@ class CentralizedGreedyPolicy(_GreedyBase):
     def act(self, state: dict[str, Any], agents: list[str]) -> dict[str, int]:
         """Actions keyed by agent name; ``agents`` lists the robots in index order."""
         return dict(zip(agents, self.act_state(state).tolist(), strict=True))
+
+
+class MapGreedyPolicy(_GreedyBase):
+    """Centralized greedy on the coverage states of one fixed map, from the map's hop distances
+    computed once: the actions of :class:`CentralizedGreedyPolicy` at a fraction of its cost
+    per state. Meant for small maps played on many times, such as the worlds of a rollout's
+    play-outs (:mod:`agents.local_rollout`); the ``(N, N)`` distance table grows with the
+    square of the map.
+
+    It is a :class:`~agents.rollout.BasePolicy`: call it on a list of states.
+
+    Args:
+        graph: The map, a :class:`~marl_cover.graph.SpatialGraph`.
+        hops: Horizon K.
+        fallback: ``"stay"`` or ``"random"``.
+        seed: Seed of the generator of ``fallback="random"``.
+    """
+
+    def __init__(
+        self, graph: Any, hops: int, fallback: str = "stay", seed: int | None = None
+    ) -> None:
+        super().__init__(hops, fallback, seed)
+        self.num_waypoints = graph.num_nodes
+        self._distance = graph.hop_distances(np.arange(graph.num_nodes))  # (N, N)
+
+    def act_state(self, state: dict[str, Any]) -> np.ndarray:
+        """Actions of every robot from a coverage state of the map, ``(R,)`` int64.
+
+        Raises:
+            ValueError: The state does not hold this map's waypoints (another map, or an
+                exploration state with part of the map undiscovered).
+        """
+        num_robots = len(state["robot_nodes"])
+        n = self.num_waypoints
+        real = int(np.count_nonzero(state["node_mask"]))
+        if real != num_robots + n:
+            raise ValueError(
+                f"the state holds {real - num_robots} waypoints; this greedy policy's map has {n}"
+            )
+        waypoints = state["nodes"][num_robots : num_robots + n]
+        targets = (waypoints[:, TARGET_COLUMNS] > 0).any(axis=1)  # (N,)
+        if not targets.any():
+            to_target = np.full(n, np.inf)
+        else:
+            to_target = self._distance[:, targets].min(axis=1)  # (N,)
+        k = NUM_ACTIONS * num_robots
+        # the move edges' senders: the waypoints of slots 1-4 (the sink where masked)
+        move_targets = state["edge_index"][0, :k].reshape(num_robots, NUM_ACTIONS)[:, 1:]
+        move_targets = (move_targets - num_robots).clip(0, n - 1)
+        return self._choose(to_target[move_targets], state["action_mask"])
+
+    def __call__(self, states: list[dict[str, Any]]) -> np.ndarray:
+        """Actions ``(B, R)`` for the ``B`` states (a :class:`~agents.rollout.BasePolicy`)."""
+        return np.stack([self.act_state(state) for state in states])
+
+
+def greedy_return(
+    env: Any, hops: int, first: np.ndarray | None = None, compiled: bool | None = None
+) -> float:
+    """The points greedy visits from a coverage environment's current state to the end of its
+    episode (greedy with horizon ``hops``, staying when nothing is within reach; the
+    environment is left unchanged): the cheap finish of a rollout's play-outs.
+
+    Args:
+        env: A :class:`~marl_cover.env.CoverageEnv` of the coverage task, mid-episode.
+        hops: Greedy's horizon K.
+        first: ``(R,)`` the first step's action of each robot, ``-1`` for greedy's (default:
+            greedy's for all).
+        compiled: Play it in the numba kernel (:mod:`agents._greedy_numba`) or on a fork of
+            the environment with :class:`MapGreedyPolicy` (the reference; both give the same
+            numbers). ``None``: the kernel where numba is installed.
+
+    Raises:
+        ValueError: The environment is not a coverage one, or ``compiled`` without numba.
+    """
+    if env.config.task != "coverage":
+        raise ValueError(f"greedy_return plays coverage environments, not {env.config.task!r}")
+    if compiled is None:
+        compiled = _compiled_play_out is not None
+    elif compiled and _compiled_play_out is None:
+        raise ValueError("compiled greedy play-outs need numba installed")
+    if not env.agents:
+        return 0.0
+    snapshot = env.snapshot()
+    first = np.full(len(snapshot.robot_node), -1, dtype=np.int64) if first is None else first
+    first = np.asarray(first, dtype=np.int64)
+    if compiled:
+        return float(
+            _compiled_play_out(
+                snapshot.graph.neighbors,
+                snapshot.robot_node,
+                snapshot.interest & ~snapshot.visited,
+                snapshot.max_steps - snapshot.num_steps,
+                hops,
+                env.config.allow_swaps,
+                first,
+            )
+        )
+    fork, policy = env.fork(), MapGreedyPolicy(snapshot.graph, hops)
+    actions = np.where(first >= 0, first, policy([fork.state()])[0])
+    total = float(fork.apply_actions(actions).new_interest.sum())
+    while fork.agents:
+        total += float(fork.apply_actions(policy([fork.state()])[0]).new_interest.sum())
+    return total

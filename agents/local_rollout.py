@@ -32,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from agents.greedy import greedy_return
 from agents.models.policy import GNNPolicy
 from agents.rollout import BasePolicy, GNNArgmax, play_out
 from agents.spread import teammate_waypoints
@@ -133,6 +134,12 @@ class LocalRolloutPolicy(GNNPolicy):
         frontier_as_interest: In exploration, count the frontier in view as points of interest.
         base: The play-outs' policy over the world's states (default: the GNN's argmax,
             :class:`~agents.rollout.GNNArgmax`).
+        greedy_after: After this many joint moves of a play-out by ``base`` (the first of
+            them: the candidate and the teammates' moves), greedy plays the rest (with the
+            GNN's horizon K, staying when nothing is within reach:
+            :func:`~agents.greedy.greedy_return`, a compiled play-out, hundreds of times
+            cheaper than the network's steps); ``0``: greedy from the first move on, the
+            teammates' first moves included; ``None``: ``base`` to the end.
 
     Attributes:
         counts: ``decisions`` (robot decisions), ``played`` (those with a near-tie, played
@@ -143,7 +150,7 @@ class LocalRolloutPolicy(GNNPolicy):
             record them for imitation.
 
     Raises:
-        ValueError: ``margin`` is negative or ``horizon`` is below 1.
+        ValueError: ``margin`` or ``greedy_after`` is negative, or ``horizon`` is below 1.
     """
 
     def __init__(
@@ -153,16 +160,20 @@ class LocalRolloutPolicy(GNNPolicy):
         horizon: int | None = None,
         frontier_as_interest: bool = False,
         base: BasePolicy | None = None,
+        greedy_after: int | None = None,
     ) -> None:
         if not margin >= 0:
             raise ValueError(f"the rollout margin must be >= 0, got {margin}")
         if horizon is not None and horizon < 1:
             raise ValueError(f"the rollout horizon must be >= 1 step, got {horizon}")
+        if greedy_after is not None and greedy_after < 0:
+            raise ValueError(f"the rollout's greedy_after must be >= 0 moves, got {greedy_after}")
         super().__init__(model)
         self.margin = float(margin)
         self.horizon = horizon
         self.frontier_as_interest = frontier_as_interest
         self.base = base if base is not None else GNNArgmax(model)
+        self.greedy_after = greedy_after
         self.counts: Counter[str] = Counter()
         self.accept = np.zeros(0, dtype=np.int64)
 
@@ -200,10 +211,7 @@ class LocalRolloutPolicy(GNNPolicy):
             )
         except KeyError as error:
             raise KeyError(f"the observation of {agent} has no {error.args[0]!r}") from None
-        joint = np.asarray(self.base([world.state()])[0])  # (1 + T,) the GNN in that world
-        joints = np.repeat(joint[None, :], len(candidates), axis=0)  # (C, 1 + T)
-        joints[:, 0] = candidates
-        returns = play_out(world, self.base, joints)  # (C,)
+        returns = self._play_outs(world, candidates)  # (C,)
         self.counts["played"] += 1
         self.counts["play_outs"] += len(candidates)
         top = candidates[returns == returns.max()]
@@ -212,3 +220,23 @@ class LocalRolloutPolicy(GNNPolicy):
             return best, accept
         self.counts["changed"] += 1
         return int(top[np.argmax(logits[top])]), accept
+
+    def _play_outs(self, world: CoverageEnv, candidates: np.ndarray) -> np.ndarray:
+        """The return ``(C,)`` of each candidate first move of robot 0 in ``world``."""
+        hops = self.model.config.hops
+        if self.greedy_after == 0:
+            first = np.full((len(candidates), world.config.num_robots), -1, dtype=np.int64)
+            first[:, 0] = candidates
+            return np.array([greedy_return(world, hops, f) for f in first])
+        joint = np.asarray(self.base([world.state()])[0])  # (1 + T,) the base in that world
+        joints = np.repeat(joint[None, :], len(candidates), axis=0)  # (C, 1 + T)
+        joints[:, 0] = candidates
+        if self.greedy_after is None:
+            return play_out(world, self.base, joints)
+        return play_out(
+            world,
+            self.base,
+            joints,
+            steps=self.greedy_after,
+            finish=lambda rest: greedy_return(rest, hops),
+        )

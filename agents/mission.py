@@ -222,6 +222,9 @@ class MissionConfig:
             decentralized planner on top of the GNN); ``None``: off.
         gnn_rollout_horizon: Moves of each such play-out (the world is the discrete
             environment on the robot's ego-graph).
+        gnn_rollout_greedy_after: Greedy plays each play-out's moves after this many of the
+            network's (``LocalRolloutPolicy(greedy_after=...)``: several times faster);
+            ``None``: the network to the end.
         expert_iterations: PyVRP iterations per expert solve (deterministic plans).
         dynamics: The continuous-time mode (quadrotor, control loop, radii, altitudes, noise).
         out: Output folder.
@@ -242,6 +245,7 @@ class MissionConfig:
     gnn_spread: float | None = None
     gnn_rollout: float | None = None
     gnn_rollout_horizon: int = 20
+    gnn_rollout_greedy_after: int | None = None
     expert_iterations: int = 2000
     dynamics: DynamicsConfig = field(default_factory=DynamicsConfig)
     out: str = "outputs/mission"
@@ -274,11 +278,14 @@ class MissionConfig:
             or self.gnn_spread is not None
             or not self.gnn_rollout >= 0
             or self.gnn_rollout_horizon < 1
+            or (self.gnn_rollout_greedy_after or 0) < 0
         ):
             raise ValueError(
-                f"mission gnn_rollout must be >= 0 with gnn_rollout_horizon >= 1, on ego-graphs "
-                f"and without gnn_spread; got gnn_rollout={self.gnn_rollout} "
+                f"mission gnn_rollout must be >= 0 with gnn_rollout_horizon >= 1 and "
+                f"gnn_rollout_greedy_after >= 0 (or null), on ego-graphs and without gnn_spread; "
+                f"got gnn_rollout={self.gnn_rollout} "
                 f"gnn_rollout_horizon={self.gnn_rollout_horizon} "
+                f"gnn_rollout_greedy_after={self.gnn_rollout_greedy_after} "
                 f"gnn_centralized={self.gnn_centralized} gnn_spread={self.gnn_spread}"
             )
         if "gnn" in self.methods and self.checkpoint and not Path(self.checkpoint).is_file():
@@ -332,6 +339,8 @@ class MissionConfig:
             if self.gnn_rollout is not None:
                 setup["gnn_rollout"] = self.gnn_rollout
                 setup["gnn_rollout_horizon"] = self.gnn_rollout_horizon
+                if self.gnn_rollout_greedy_after is not None:  # absent from earlier setups
+                    setup["gnn_rollout_greedy_after"] = self.gnn_rollout_greedy_after
         elif method == "expert":
             setup["expert_iterations"] = self.expert_iterations
         return setup
@@ -370,7 +379,10 @@ def make_mission_policy(method: str, config: MissionConfig) -> Any:
             from agents.local_rollout import LocalRolloutPolicy
 
             return LocalRolloutPolicy(
-                model, margin=config.gnn_rollout, horizon=config.gnn_rollout_horizon
+                model,
+                margin=config.gnn_rollout,
+                horizon=config.gnn_rollout_horizon,
+                greedy_after=config.gnn_rollout_greedy_after,
             )
         return GNNPolicy(model, centralized=config.gnn_centralized, spread_margin=config.gnn_spread)
     if method == "expert":

@@ -24,8 +24,8 @@ network base decides for all of them in one batched pass (:class:`GNNArgmax`).
 
 from __future__ import annotations
 
-import copy
 from collections import Counter
+from collections.abc import Callable
 from typing import Any, Protocol
 
 import numpy as np
@@ -70,18 +70,28 @@ class GNNArgmax:
 
 
 def fork(env: CoverageEnv) -> CoverageEnv:
-    """An independent copy of ``env`` mid-episode (its map is shared: it never changes)."""
-    graph = env.snapshot().graph
-    return copy.deepcopy(env, {id(graph): graph})
+    """An independent copy of ``env`` mid-episode (:meth:`CoverageEnv.fork`: what no step
+    changes is shared)."""
+    return env.fork()
 
 
-def play_out(env: CoverageEnv, base: BasePolicy, joints: np.ndarray) -> np.ndarray:
+def play_out(
+    env: CoverageEnv,
+    base: BasePolicy,
+    joints: np.ndarray,
+    steps: int | None = None,
+    finish: Callable[[CoverageEnv], float] | None = None,
+) -> np.ndarray:
     """The exact return of each joint action followed by ``base`` to the end of the episode.
 
     Args:
         env: The environment mid-episode (left unchanged).
         base: The policy every robot follows after the first step.
         joints: ``(J, R)`` first-step actions (unmasked moves; a masked one is a stay).
+        steps: Play only this many steps (the joint action's included) on ``base``
+            (``None``: to the end of the episode).
+        finish: With ``steps``: the return of the rest of the episode from where a play-out
+            stands (for instance a cheaper policy's, :func:`agents.greedy.greedy_return`).
 
     Returns:
         ``(J,)`` float: the team reward from this step to the end, for each joint action.
@@ -93,12 +103,17 @@ def play_out(env: CoverageEnv, base: BasePolicy, joints: np.ndarray) -> np.ndarr
             for f, j in zip(forks, joints, strict=True)
         ]
     )
+    played = 1
     live = [k for k, f in enumerate(forks) if f.agents]
-    while live:
+    while live and (steps is None or played < steps):
         actions = base([forks[k].state() for k in live])  # (len(live), R)
         for k, action in zip(live, actions, strict=True):
             totals[k] += float(forks[k].apply_actions(action).new_interest.sum())
         live = [k for k in live if forks[k].agents]
+        played += 1
+    if finish is not None:
+        for k in live:
+            totals[k] += finish(forks[k])
     return totals
 
 

@@ -78,6 +78,7 @@ Version history: v0, first release.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import functools
 import numbers
@@ -222,25 +223,6 @@ class CoverageEnv(ParallelEnv):
         self._state_shape = state_shape(
             self._map_source.max_waypoints, self._map_source.max_waypoint_edges, base.num_robots
         )
-        action_mask = gymnasium.spaces.Box(0, 1, (NUM_ACTIONS,), np.int8)
-        clock = gymnasium.spaces.Box(0, base.max_steps, (), np.int64)  # steps_left
-        self._observation_space = graph_space(
-            self._ego_shape, {"action_mask": action_mask, "steps_left": clock}
-        )
-        self._action_spaces = {
-            a: gymnasium.spaces.Discrete(NUM_ACTIONS) for a in self.possible_agents
-        }
-        r = base.num_robots
-        self.state_space = graph_space(
-            self._state_shape,
-            {
-                "action_mask": gymnasium.spaces.Box(0, 1, (r, NUM_ACTIONS), np.int8),
-                "robot_nodes": gymnasium.spaces.Box(
-                    0, self._state_shape.max_nodes - 1, (r,), np.int64
-                ),
-                "steps_left": clock,
-            },
-        )
         self._rng: np.random.Generator | None = None
         self._graph: SpatialGraph | None = None
         self._state_builder: StateBuilder | None = None
@@ -249,6 +231,32 @@ class CoverageEnv(ParallelEnv):
         self._renderer: Any = None
 
     # ------------------------------------------------------------------ spaces
+    # Built on first use: a planner that makes many small environments never reads them.
+    @functools.cached_property
+    def _observation_space(self) -> gymnasium.spaces.Dict:
+        action_mask = gymnasium.spaces.Box(0, 1, (NUM_ACTIONS,), np.int8)
+        clock = gymnasium.spaces.Box(0, self.config.max_steps, (), np.int64)  # steps_left
+        return graph_space(self._ego_shape, {"action_mask": action_mask, "steps_left": clock})
+
+    @functools.cached_property
+    def _action_spaces(self) -> dict[str, gymnasium.spaces.Discrete]:
+        return {a: gymnasium.spaces.Discrete(NUM_ACTIONS) for a in self.possible_agents}
+
+    @functools.cached_property
+    def state_space(self) -> gymnasium.spaces.Dict:
+        """The space of :meth:`state` (one object)."""
+        r = self.config.num_robots
+        return graph_space(
+            self._state_shape,
+            {
+                "action_mask": gymnasium.spaces.Box(0, 1, (r, NUM_ACTIONS), np.int8),
+                "robot_nodes": gymnasium.spaces.Box(
+                    0, self._state_shape.max_nodes - 1, (r,), np.int64
+                ),
+                "steps_left": gymnasium.spaces.Box(0, self.config.max_steps, (), np.int64),
+            },
+        )
+
     @property
     def max_waypoints(self) -> int:
         """Most waypoints of any map this environment can draw (the padding bound)."""
@@ -561,6 +569,14 @@ class CoverageEnv(ParallelEnv):
         """Actions left in the episode (``state()["steps_left"]``)."""
         return self.config.max_steps - self._num_steps
 
+    def fork(self) -> CoverageEnv:
+        """An independent copy of the environment mid-episode, for planners that play futures
+        out: the episode's state (positions, visits, clock, generator, discovery) is copied;
+        what no step changes (the configuration, the map, the spaces, the state builder) is
+        shared, which makes a fork several times cheaper than a plain ``copy.deepcopy``."""
+        memo = {id(part): part for part in map(self.__dict__.get, _UNCHANGED) if part is not None}
+        return copy.deepcopy(self, memo)
+
     def snapshot(self) -> CoverageSnapshot:
         """A read-only copy of the episode's state for planners."""
         return CoverageSnapshot(
@@ -634,6 +650,22 @@ class CoverageEnv(ParallelEnv):
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
+
+
+#: What an episode never changes in a :class:`CoverageEnv` (shared by :meth:`~CoverageEnv.fork`;
+#: the spaces only once built).
+_UNCHANGED = (
+    "config",
+    "_map_source",
+    "_graph",
+    "_state_builder",
+    "_footprint",
+    "_observation_space",
+    "_action_spaces",
+    "state_space",
+    "_ego_shape",
+    "_state_shape",
+)
 
 
 def _is_action(value: Any) -> bool:

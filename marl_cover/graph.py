@@ -97,18 +97,26 @@ class SpatialGraph:
         if outside.any():
             u, v = edges[np.flatnonzero(outside.any(axis=1))[0]]
             raise ValueError(f"edge ({u}, {v}) names a node outside [0, {num_nodes})")
+        # each edge in both directions, in edge order: (u0, v0), (v0, u0), (u1, v1), ...
+        src, dst = edges.reshape(-1), edges[:, ::-1].reshape(-1)  # (2 E,)
+        slot = np.argmax((positions[dst] - positions[src]) @ SLOT_DIRECTIONS.T, axis=1)
+        key = src * NUM_SLOTS + slot
+        order = np.argsort(key, kind="stable")
+        repeat = np.flatnonzero(key[order][1:] == key[order][:-1]) + 1
+        # errors as an edge-by-edge construction meets them: the first in edge order
+        clash = int(order[repeat].min()) if len(repeat) else len(src)
+        loops = np.flatnonzero(edges[:, 0] == edges[:, 1])
+        if len(loops) and 2 * loops[0] <= clash:
+            u = int(edges[loops[0], 0])
+            raise ValueError(f"edge ({u}, {u}) is a self-loop")
+        if clash < len(src):
+            first = int(order[np.flatnonzero(key[order] == key[clash])[0]])
+            raise ValueError(
+                f"node {src[clash]} has two neighbours in slot '{SLOT_NAMES[slot[clash]]}': "
+                f"{dst[first]} and {dst[clash]}"
+            )
         neighbors = np.full((num_nodes, NUM_SLOTS), -1, dtype=np.int64)
-        for u, v in edges:
-            if u == v:
-                raise ValueError(f"edge ({u}, {v}) is a self-loop")
-            for a, b in ((u, v), (v, u)):
-                slot = int(np.argmax(SLOT_DIRECTIONS @ (positions[b] - positions[a])))
-                if neighbors[a, slot] != -1:
-                    raise ValueError(
-                        f"node {a} has two neighbours in slot '{SLOT_NAMES[slot]}': "
-                        f"{neighbors[a, slot]} and {b}"
-                    )
-                neighbors[a, slot] = b
+        neighbors[src, slot] = dst
         return cls(positions, neighbors, cell_size)
 
     @classmethod

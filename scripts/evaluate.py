@@ -41,7 +41,8 @@ decentralized one (``agents.local_rollout``): each robot plays its moves within
 view and itself then on the GNN's argmax, for ``gnn.horizon`` steps (default: to the end);
 in exploration it plays on the discovered waypoints in view, and
 ``gnn.frontier_as_interest=true`` also scores the frontier there; about 3 s an episode on the
-paper's windows.
+paper's windows; ``gnn.greedy_after=N``: greedy plays the play-outs' moves after the GNN's
+first N (faster).
 Maps: ``city`` (default), ``paper`` (windows of the paper's map), ``paper_full``,
 ``paper_large``, or a grid file. Any other ``key=value`` is a field of ``CoverageConfig``
 (``num_robots=10``, ``max_steps=49``, ...); an unknown key is an error.
@@ -98,6 +99,7 @@ class GNNOptions:
     margin: float = 1.0  # gnn_local_rollout: moves within this of the best logit are played out
     horizon: int | None = None  # gnn_local_rollout: steps of a play-out (None: to the end)
     frontier_as_interest: bool = False  # gnn_local_rollout, exploration: the frontier scores
+    greedy_after: int | None = None  # gnn_local_rollout: greedy after this many GNN moves
 
 
 @dataclass
@@ -193,20 +195,23 @@ def parse_overrides(
             "(it plays out the GNN's argmax)"
         )
     default = GNNOptions()
-    planning = ("margin", "horizon", "frontier_as_interest")
+    planning = ("margin", "horizon", "frontier_as_interest", "greedy_after")
     if options.policy != "gnn_local_rollout" and any(
         getattr(gnn, name) != getattr(default, name) for name in planning
     ):
         raise SystemExit(
-            "gnn.margin, gnn.horizon and gnn.frontier_as_interest apply to "
+            "gnn.margin, gnn.horizon, gnn.frontier_as_interest and gnn.greedy_after apply to "
             "policy=gnn_local_rollout only"
         )
     if options.policy == "gnn_local_rollout" and not (
-        gnn.margin >= 0 and (gnn.horizon is None or gnn.horizon >= 1)
+        gnn.margin >= 0
+        and (gnn.horizon is None or gnn.horizon >= 1)
+        and (gnn.greedy_after is None or gnn.greedy_after >= 0)
     ):
         raise SystemExit(
-            f"policy=gnn_local_rollout needs gnn.margin >= 0 and gnn.horizon >= 1 (or null), "
-            f"got gnn.margin={gnn.margin} gnn.horizon={gnn.horizon}"
+            f"policy=gnn_local_rollout needs gnn.margin >= 0, gnn.horizon >= 1 (or null) and "
+            f"gnn.greedy_after >= 0 (or null), got gnn.margin={gnn.margin} "
+            f"gnn.horizon={gnn.horizon} gnn.greedy_after={gnn.greedy_after}"
         )
     if expert.information != "full" and options.policy == "expert_local":
         raise SystemExit(
@@ -271,6 +276,7 @@ def make_policy(
             margin=gnn.margin,
             horizon=gnn.horizon,
             frontier_as_interest=gnn.frontier_as_interest,
+            greedy_after=gnn.greedy_after,
         )
     if options.policy in ("greedy", "greedy_central"):
         from agents.greedy import CentralizedGreedyPolicy, GreedyPolicy

@@ -358,3 +358,29 @@ def test_robots_never_share_a_waypoint(seed, num_robots, allow_swaps, actions) -
                 assert after[i] == before[i]
         if not env.agents:
             break
+
+
+@pytest.mark.parametrize("task", ["coverage", "exploration"])
+def test_a_fork_plays_the_same_future_and_leaves_the_original_alone(task: str) -> None:
+    env = marl_cover.parallel_env(task=task, num_robots=3, hops=3, max_steps=12, city_size=200)
+    env.reset(seed=2)
+    rng = np.random.default_rng(0)
+
+    def random_moves(mask: np.ndarray) -> np.ndarray:
+        return np.array([rng.choice(np.flatnonzero(row)) for row in mask])
+
+    for _ in range(3):
+        env.apply_actions(random_moves(env.state()["action_mask"]))
+    before = env.state()
+    fork = env.fork()
+    assert fork.snapshot().graph is env.snapshot().graph and fork.config is env.config
+    moves, rewards = [], []
+    while fork.agents:
+        moves.append(random_moves(fork.state()["action_mask"]))
+        rewards.append(fork.apply_actions(moves[-1]).new_interest.tolist())
+    assert sum(map(sum, rewards)) > 0 and not fork.agents and env.agents
+    for key, value in before.items():
+        np.testing.assert_array_equal(env.state()[key], value)
+    # the original then plays the fork's moves and gets the fork's rewards
+    assert [env.apply_actions(m).new_interest.tolist() for m in moves] == rewards
+    assert not env.agents

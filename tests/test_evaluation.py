@@ -118,8 +118,10 @@ def test_cli_rejects_unknown_keys() -> None:
         ("policy=greedy gnn.spread=0.5", "a margin >= 0 for policy=gnn"),
         ("policy=gnn gnn.spread=-1", "gnn.spread=-1: a margin >= 0"),
         ("policy=gnn gnn.margin=0.5", "apply to policy=gnn_local_rollout only"),
-        ("policy=gnn_local_rollout gnn.horizon=0", "needs gnn.margin >= 0 and gnn.horizon >= 1"),
+        ("policy=gnn_local_rollout gnn.horizon=0", "needs gnn.margin >= 0, gnn.horizon >= 1"),
         ("policy=gnn_local_rollout gnn.margin=-1", "got gnn.margin=-1 gnn.horizon=None"),
+        ("policy=gnn_local_rollout gnn.greedy_after=-2", "gnn.greedy_after=-2"),
+        ("policy=gnn gnn.greedy_after=1", "gnn.greedy_after apply to policy=gnn_local_rollout"),
         ("policy=gnn_local_rollout gnn.centralized=true", "do not apply to policy=gnn_local"),
     ],
 )

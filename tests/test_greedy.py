@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
+from helpers import random_grid_graph
 
 import marl_cover
-from agents.greedy import CentralizedGreedyPolicy, GreedyPolicy
+from agents.greedy import CentralizedGreedyPolicy, GreedyPolicy, MapGreedyPolicy, greedy_return
 
 STAY, EAST, NORTH, WEST, SOUTH = range(5)
 
@@ -49,6 +51,74 @@ def test_centralized_gives_the_same_actions(hops: int, fallback: str) -> None:
             actions = local.act(obs)
             assert actions == central.act(env.state(), env.possible_agents)
             obs, *_ = env.step(actions)
+
+
+@pytest.mark.parametrize(("hops", "fallback"), [(2, "stay"), (5, "random")])
+def test_map_greedy_gives_the_centralized_actions(hops: int, fallback: str) -> None:
+    env = marl_cover.parallel_env(num_robots=4, hops=hops, city_size=200)
+    for seed in range(3):
+        env.reset(seed=seed)
+        central = CentralizedGreedyPolicy(hops, fallback=fallback, seed=seed)
+        on_map = MapGreedyPolicy(env.snapshot().graph, hops, fallback=fallback, seed=seed)
+        moves = 0
+        while env.agents:
+            state = env.state()
+            actions = central.act_state(state)
+            np.testing.assert_array_equal(on_map([state])[0], actions)
+            moves += int((actions > 0).sum())
+            env.apply_actions(actions)
+        assert moves > 0
+
+
+def test_map_greedy_names_a_state_of_another_map(tee_graph, path_graph) -> None:
+    env = marl_cover.parallel_env(graph=path_graph, num_robots=1, hops=7)
+    env.reset(seed=0, options={"robot_nodes": [3], "interest_nodes": [7]})
+    assert MapGreedyPolicy(path_graph, 4)([env.state()]).tolist() == [[EAST]]
+    assert MapGreedyPolicy(path_graph, 3)([env.state()]).tolist() == [[STAY]]
+    with pytest.raises(ValueError, match=r"holds 8 waypoints; this greedy policy's map has 6"):
+        MapGreedyPolicy(tee_graph, 3)([env.state()])
+
+
+@pytest.mark.parametrize("allow_swaps", [True, False])
+def test_compiled_greedy_play_outs_equal_the_environments(allow_swaps: bool) -> None:
+    """Crowded random grids (up to 12 robots, on at least twice as many waypoints: blocked
+    moves, chains and swaps), some first moves forced (masked ones included): the kernel's
+    return is the environment's, step for step, and the environment is left alone."""
+    pytest.importorskip("numba")
+    rng = np.random.default_rng(7)
+    totals = []
+    for seed in range(25):
+        graph = random_grid_graph(rng, 8, 8, density=0.7)
+        while graph.num_nodes < 20:
+            graph = random_grid_graph(rng, 8, 8, density=0.7)
+        num_robots = int(rng.integers(2, min(13, graph.num_nodes // 2)))
+        env = marl_cover.parallel_env(
+            graph=graph,
+            num_robots=num_robots,
+            hops=int(rng.integers(1, 10)),
+            max_steps=int(rng.integers(1, 25)),
+            interest_fraction=0.6,
+            allow_swaps=allow_swaps,
+        )
+        env.reset(seed=seed)
+        for _ in range(int(rng.integers(0, 3))):
+            env.apply_actions(rng.integers(0, 5, size=num_robots))
+        before = env.state()
+        for first in (None, rng.integers(-1, 5, size=num_robots)):
+            hops = env.config.hops
+            compiled = greedy_return(env, hops, first, compiled=True)
+            assert compiled == greedy_return(env, hops, first, compiled=False)
+            totals.append(compiled)
+        for key, value in before.items():
+            np.testing.assert_array_equal(env.state()[key], value)
+    assert len(set(totals)) > 5  # the cases differ
+
+
+def test_greedy_return_names_an_exploration_environment() -> None:
+    env = marl_cover.parallel_env(task="exploration", num_robots=2, hops=3, city_size=200)
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="plays coverage environments, not 'exploration'"):
+        greedy_return(env, 3)
 
 
 def greedy_returns(seeds, **config) -> list[float]:

@@ -176,6 +176,30 @@ def test_near_ties_are_played_out_and_the_better_one_taken() -> None:
     assert policy.counts["changed"] == 0
 
 
+@pytest.mark.parametrize(("interest", "chosen"), [([0, 1, 5], WEST), ([0, 5, 6], EAST)])
+@pytest.mark.parametrize("greedy_after", [0, 1, 2])
+def test_greedy_finishes_the_play_outs(interest: list[int], chosen: int, greedy_after: int) -> None:
+    """The corridor of the test above, greedy (K = 4, the model's) after ``greedy_after``
+    moves of "stay". Points 0, 1, 5: west (2) then toward 1, 0 returns 2 even after a stay, east
+    (4) then 5 returns 1. Points 0, 5, 6: east then 5, 6 returns 2, west then 1, 0 returns 1:
+    the argmax east stays."""
+    env = marl_cover.parallel_env(graph=lattice(7, 1), num_robots=1, hops=6, max_steps=4)
+    observations, _ = env.reset(seed=0, options={"robot_nodes": [3], "interest_nodes": interest})
+    policy = FixedLogits(
+        [[0.0, 1.0, -np.inf, 0.8, -np.inf]],
+        margin=0.5,
+        base=always(STAY),
+        greedy_after=greedy_after,
+    )
+    assert policy.act(observations) == {"robot_0": chosen}
+    assert policy.counts["play_outs"] == 2
+    assert policy.counts["changed"] == int(chosen == WEST)
+    never = FixedLogits([[0.0, 1.0, -np.inf, 0.8, -np.inf]], margin=0.5, base=always(STAY))
+    assert never.act(observations) == {"robot_0": EAST}  # on "stay" both return 0: a tie
+    with pytest.raises(ValueError, match=r"greedy_after must be >= 0 moves, got -1"):
+        FixedLogits([[0.0] * 5], greedy_after=-1)
+
+
 def test_margin_zero_is_the_gnn_and_bad_settings_are_named() -> None:
     graph = lattice(4, 3)
     torch.manual_seed(0)

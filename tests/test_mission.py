@@ -118,6 +118,7 @@ def test_mission_config_rejects_unknown_methods_and_keys() -> None:
         ["gnn_rollout=1", "gnn_rollout_horizon=0"],
         ["gnn_rollout=1", "gnn_centralized=true"],
         ["gnn_rollout=1", "gnn_spread=0.5"],
+        ["gnn_rollout=1", "gnn_rollout_greedy_after=-1"],
     ):
         with pytest.raises(ValueError, match="gnn_rollout must be >= 0 with gnn_rollout_hor"):
             load(MissionConfig, None, bad)
@@ -127,6 +128,10 @@ def test_mission_config_rejects_unknown_methods_and_keys() -> None:
     assert planned.setup("gnn")["gnn_rollout"] == 1.5
     assert planned.setup("gnn")["gnn_rollout_horizon"] == 20
     assert "gnn_rollout" not in config.setup("gnn")
+    assert "gnn_rollout_greedy_after" not in planned.setup("gnn")  # earlier setups match
+    on_greedy = load(MissionConfig, None, ["gnn_rollout=1", "gnn_rollout_greedy_after=2"])
+    assert make_mission_policy("gnn", on_greedy).greedy_after == 2
+    assert on_greedy.setup("gnn")["gnn_rollout_greedy_after"] == 2
 
 
 def test_ego_graphs_span_the_gnn_receptive_field(tmp_path: Path) -> None:
@@ -232,3 +237,7 @@ def test_the_decentralized_rollout_flies_the_mission() -> None:
     assert tied.visited == plain.visited and "changed" not in tied.policy_counts
     wide = run_mission(small_env(30.0), LocalRolloutPolicy(model, margin=100.0, horizon=3), seed=4)
     assert wide.policy_counts["played"] > 0 and wide.policy_counts["changed"] > 0
+    greedy = LocalRolloutPolicy(model, margin=100.0, horizon=3, greedy_after=0)
+    on_greedy = run_mission(small_env(30.0), greedy, seed=4)
+    assert on_greedy.policy_counts["played"] == wide.policy_counts["played"]
+    assert on_greedy.visited != wide.visited  # other play-outs, other choices
