@@ -15,7 +15,11 @@ a robot plans with nothing but its observation:
 3. It plays each candidate out in that world, exactly (:func:`agents.rollout.play_out`): its
    first move the candidate, its teammates' the GNN's argmax in that world, every robot on
    the GNN's argmax afterwards. It keeps its argmax unless another candidate returns strictly
-   more, and then takes the best logit among those that return most.
+   more, and then takes the best logit among those that return most. With ``greedy_after``
+   the network plays only a play-out's first moves and greedy the rest, in a compiled kernel
+   (:func:`agents.greedy.greedy_return`): the network's passes are most of the cost, and in
+   the quadrotor mission two of its moves keep about 60% of the gain at five times the speed
+   (session 38).
 
 Teammates plan the same way on their own views, at the same time, without communicating: the
 policy is as decentralized as the GNN. The robot's world model is wrong where its view ends
