@@ -246,6 +246,7 @@ def test_cli_plays_the_decentralized_rollout(tmp_path) -> None:
         ("gnn", ["policy=gnn"]),
         ("zero", ["policy=gnn_local_rollout", "gnn.margin=0"]),
         ("wide", ["policy=gnn_local_rollout", "gnn.margin=100", "gnn.horizon=4"]),
+        ("finish", ["policy=gnn_local_rollout", "gnn.margin=100", "gnn.greedy_after=1"]),
         ("explore", ["policy=gnn_local_rollout", "task=exploration", "gnn.margin=100"]),
         (
             "frontier",
@@ -265,7 +266,7 @@ def test_cli_plays_the_decentralized_rollout(tmp_path) -> None:
     assert rewards["zero"] == rewards["gnn"]
     assert records["zero"]["policy_counts"]["decisions"] == 2 * 8 * 3
     assert "played" not in records["zero"]["policy_counts"]
-    for name in ("wide", "explore", "frontier"):
+    for name in ("wide", "finish", "explore", "frontier"):
         counts = records[name]["policy_counts"]
         assert counts["decisions"] == 2 * 8 * 3 and 0 < counts["played"] <= counts["decisions"]
         assert 2 * counts["played"] <= counts["play_outs"] <= 5 * counts["played"]
