@@ -46,7 +46,10 @@ def fly_all(config: MissionConfig, out: Path) -> dict[str, list[dict]]:
         for seed in range(config.seed, config.seed + config.seeds):
             path = out / "runs" / f"{method}_{seed}.json"
             if path.is_file():
-                results[method].append(read_result(path, setup))
+                try:
+                    results[method].append(read_result(path, setup))
+                except ValueError as error:  # made under another setup: named, no traceback
+                    raise SystemExit(f"run_mission.py: error: {error}") from None
                 continue
             policy = policy or make_mission_policy(method, config)
             result = {**run_mission(env, policy, seed).as_dict(), "setup": setup}

@@ -182,7 +182,7 @@ def test_run_mission_script(tmp_path: Path) -> None:
     # Another model under the same out= folder is an error that names the run and the change.
     other = args + ["checkpoint=agents/models/shipped/bc/coverage_gnn.pt"]
     refused = run_script("run_mission.py", *other)
-    assert refused.returncode != 0
+    assert refused.returncode != 0 and "Traceback" not in refused.stderr
     assert "gnn_0.json was made under another setup" in refused.stderr
     assert "model_sha256" in refused.stderr
     # A bad override ends the script with one line naming it, before anything flies.
