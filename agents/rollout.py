@@ -95,7 +95,12 @@ def play_out(
 
     Returns:
         ``(J,)`` float: the team reward from this step to the end, for each joint action.
+
+    Raises:
+        ValueError: ``steps`` is below 1 (the joint action is always played).
     """
+    if steps is not None and steps < 1:
+        raise ValueError(f"play_out plays at least the joint action's step, got steps={steps}")
     forks = [fork(env) for _ in joints]
     totals = np.array(
         [

@@ -232,3 +232,21 @@ def test_own_labels_are_the_learners_moves() -> None:
         RolloutLabelConfig(labels="local", margin=-1.0)
     with pytest.raises(FileNotFoundError, match=r"no model file at nowhere.pt \(checkpoint\)"):
         RolloutLabelConfig(checkpoint="nowhere.pt")
+
+
+def test_play_outs_cut_short_and_finished_by_another_policy(path_graph) -> None:
+    """Robot on 3 of the 8-waypoint path, points on 1, 5 and 6, five steps. East then the
+    "west" base for two steps collects nothing; finished by greedy from there (robot on 3,
+    three steps left) it collects 5 and 6; to the end on "west" it collects 1."""
+    from agents.greedy import greedy_return
+
+    env = path_env(path_graph, [3], [1, 5, 6], max_steps=5)
+    joints = np.array([[EAST]])
+    assert play_out(env, Constant(WEST), joints).tolist() == [1.0]
+    finished = play_out(
+        env, Constant(WEST), joints, steps=2, finish=lambda rest: greedy_return(rest, 7)
+    )
+    assert finished.tolist() == [2.0]
+    assert play_out(env, Constant(WEST), joints, steps=2).tolist() == [0.0]
+    with pytest.raises(ValueError, match="at least the joint action's step, got steps=0"):
+        play_out(env, Constant(WEST), joints, steps=0)
