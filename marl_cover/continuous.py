@@ -224,6 +224,9 @@ class QuadrotorCoverageEnv(CoverageEnv):
 
     metadata = {**CoverageEnv.metadata, "name": "marl_cover_quadrotor_v0"}
 
+    #: The dynamics, its compiled kernels and the waypoint lookup never change in an episode.
+    _FORK_SHARED = (*CoverageEnv._FORK_SHARED, "dynamics", "_kernels", "_locator")
+
     def __init__(
         self,
         config: CoverageConfig | None = None,

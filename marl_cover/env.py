@@ -200,6 +200,20 @@ class CoverageEnv(ParallelEnv):
         "is_parallelizable": True,
     }
 
+    #: Attributes that no step changes, shared by :meth:`fork` (the spaces once built).
+    _FORK_SHARED: tuple[str, ...] = (
+        "config",
+        "_map_source",
+        "_graph",
+        "_state_builder",
+        "_footprint",
+        "_observation_space",
+        "_action_spaces",
+        "state_space",
+        "_ego_shape",
+        "_state_shape",
+    )
+
     def __init__(self, config: CoverageConfig | None = None, **overrides: Any) -> None:
         """Creates the environment.
 
@@ -574,7 +588,8 @@ class CoverageEnv(ParallelEnv):
         out: the episode's state (positions, visits, clock, generator, discovery) is copied;
         what no step changes (the configuration, the map, the spaces, the state builder) is
         shared, which makes a fork several times cheaper than a plain ``copy.deepcopy``."""
-        memo = {id(part): part for part in map(self.__dict__.get, _UNCHANGED) if part is not None}
+        shared = map(self.__dict__.get, self._FORK_SHARED)
+        memo = {id(part): part for part in shared if part is not None}
         return copy.deepcopy(self, memo)
 
     def snapshot(self) -> CoverageSnapshot:
@@ -650,22 +665,6 @@ class CoverageEnv(ParallelEnv):
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
-
-
-#: What an episode never changes in a :class:`CoverageEnv` (shared by :meth:`~CoverageEnv.fork`;
-#: the spaces only once built).
-_UNCHANGED = (
-    "config",
-    "_map_source",
-    "_graph",
-    "_state_builder",
-    "_footprint",
-    "_observation_space",
-    "_action_spaces",
-    "state_space",
-    "_ego_shape",
-    "_state_shape",
-)
 
 
 def _is_action(value: Any) -> bool:

@@ -348,3 +348,19 @@ def test_render_draws_robots_between_waypoints(path_graph) -> None:
     env.close()
     assert at_start.shape == moved.shape and at_start.dtype == np.uint8
     assert not np.array_equal(at_start, moved)
+
+
+def test_a_quadrotor_fork_flies_the_same_future_alone() -> None:
+    """``fork()`` mid-mission shares the dynamics, the kernels and the waypoint lookup, and
+    copies the bodies: the fork and then the original fly the same 20 steps, bit for bit."""
+    env = QuadrotorCoverageEnv(num_robots=3, hops=5, city_size=150)
+    env.reset(seed=1)
+    for _ in range(5):
+        env.step({agent: 1 for agent in env.agents})  # east
+    fork = env.fork()
+    assert fork.dynamics is env.dynamics and fork.snapshot().graph is env.snapshot().graph
+    moves = [{agent: (i % 4) + 1 for agent in fork.agents} for i in range(20)]
+    ahead = [fork.step(m)[1] for m in moves]
+    assert fork.time > env.time
+    assert [env.step(m)[1] for m in moves] == ahead
+    np.testing.assert_array_equal(env.positions, fork.positions)
