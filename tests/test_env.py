@@ -384,3 +384,14 @@ def test_a_fork_plays_the_same_future_and_leaves_the_original_alone(task: str) -
     # the original then plays the fork's moves and gets the fork's rewards
     assert [env.apply_actions(m).new_interest.tolist() for m in moves] == rewards
     assert not env.agents
+
+
+def test_a_fork_draws_with_a_renderer_of_its_own() -> None:
+    pytest.importorskip("matplotlib")
+    env = marl_cover.parallel_env(num_robots=2, hops=3, city_size=100, render_mode="rgb_array")
+    env.reset(seed=0)
+    image = env.render()
+    fork = env.fork()
+    np.testing.assert_array_equal(fork.render(), image)
+    fork.close()
+    np.testing.assert_array_equal(env.render(), image)  # the original's renderer still draws
