@@ -1,13 +1,13 @@
 """A compiled kernel for :func:`agents.greedy.greedy_return` (optional: needs numba).
 
 It plays the discrete coverage environment on greedy's moves, step for step as
-:class:`~marl_cover.env.CoverageEnv` with :class:`~agents.greedy.MapGreedyPolicy` (staying when
-nothing is within reach) play it, which stays the reference: ``tests/test_greedy.py`` checks
-that both agree. Greedy's distances to the points left come from one breadth-first search over
-the neighbour table, redone only on the steps that visit a point; collisions are resolved by the
-rule of :func:`marl_cover.collisions.resolve_collisions`. A play-out of a rollout's world (a
-hundred waypoints, ten robots, twenty steps) costs tens of microseconds instead of several
-milliseconds.
+:class:`~marl_cover.env.CoverageEnv` with :class:`~agents.greedy.CentralizedGreedyPolicy`
+(staying when nothing is within reach) play it, which stays the reference:
+``tests/test_greedy.py`` checks that both agree. Greedy's distances to the points left come
+from one breadth-first search over the neighbour table, redone only on the steps that visit a
+point; collisions are resolved by the rule of :func:`marl_cover.collisions.resolve_collisions`.
+A play-out of a rollout's world (a hundred waypoints, ten robots, twenty steps) costs tens of
+microseconds instead of several milliseconds.
 """
 
 from __future__ import annotations

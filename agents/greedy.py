@@ -25,7 +25,7 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from marl_cover.ego import NODE_FEATURES, NUM_ACTIONS
+from marl_cover.ego import NODE_FEATURES
 
 try:  # the compiled play-out of greedy_return (optional dependency numba)
     from agents._greedy_numba import greedy_play_out as _compiled_play_out
@@ -165,60 +165,6 @@ class CentralizedGreedyPolicy(_GreedyBase):
         return dict(zip(agents, self.act_state(state).tolist(), strict=True))
 
 
-class MapGreedyPolicy(_GreedyBase):
-    """Centralized greedy on the coverage states of one fixed map, from the map's hop distances
-    computed once: the actions of :class:`CentralizedGreedyPolicy` at a fraction of its cost
-    per state. Meant for small maps played on many times, such as the worlds of a rollout's
-    play-outs (:mod:`agents.local_rollout`); the ``(N, N)`` distance table grows with the
-    square of the map.
-
-    It is a :class:`~agents.rollout.BasePolicy`: call it on a list of states.
-
-    Args:
-        graph: The map, a :class:`~marl_cover.graph.SpatialGraph`.
-        hops: Horizon K.
-        fallback: ``"stay"`` or ``"random"``.
-        seed: Seed of the generator of ``fallback="random"``.
-    """
-
-    def __init__(
-        self, graph: Any, hops: int, fallback: str = "stay", seed: int | None = None
-    ) -> None:
-        super().__init__(hops, fallback, seed)
-        self.num_waypoints = graph.num_nodes
-        self._distance = graph.hop_distances(np.arange(graph.num_nodes))  # (N, N)
-
-    def act_state(self, state: dict[str, Any]) -> np.ndarray:
-        """Actions of every robot from a coverage state of the map, ``(R,)`` int64.
-
-        Raises:
-            ValueError: The state does not hold this map's waypoints (another map, or an
-                exploration state with part of the map undiscovered).
-        """
-        num_robots = len(state["robot_nodes"])
-        n = self.num_waypoints
-        real = int(np.count_nonzero(state["node_mask"]))
-        if real != num_robots + n:
-            raise ValueError(
-                f"the state holds {real - num_robots} waypoints; this greedy policy's map has {n}"
-            )
-        waypoints = state["nodes"][num_robots : num_robots + n]
-        targets = (waypoints[:, TARGET_COLUMNS] > 0).any(axis=1)  # (N,)
-        if not targets.any():
-            to_target = np.full(n, np.inf)
-        else:
-            to_target = self._distance[:, targets].min(axis=1)  # (N,)
-        k = NUM_ACTIONS * num_robots
-        # the move edges' senders: the waypoints of slots 1-4 (the sink where masked)
-        move_targets = state["edge_index"][0, :k].reshape(num_robots, NUM_ACTIONS)[:, 1:]
-        move_targets = (move_targets - num_robots).clip(0, n - 1)
-        return self._choose(to_target[move_targets], state["action_mask"])
-
-    def __call__(self, states: list[dict[str, Any]]) -> np.ndarray:
-        """Actions ``(B, R)`` for the ``B`` states (a :class:`~agents.rollout.BasePolicy`)."""
-        return np.stack([self.act_state(state) for state in states])
-
-
 def greedy_return(
     env: Any, hops: int, first: np.ndarray | None = None, compiled: bool | None = None
 ) -> float:
@@ -232,8 +178,8 @@ def greedy_return(
         first: ``(R,)`` the first step's action of each robot, ``-1`` for greedy's (default:
             greedy's for all).
         compiled: Play it in the numba kernel (:mod:`agents._greedy_numba`) or on a fork of
-            the environment with :class:`MapGreedyPolicy` (the reference; both give the same
-            numbers). ``None``: the kernel where numba is installed.
+            the environment with :class:`CentralizedGreedyPolicy` (the reference; both give the
+            same numbers). ``None``: the kernel where numba is installed.
 
     Raises:
         ValueError: The environment is not a coverage one, or ``compiled`` without numba.
@@ -261,9 +207,9 @@ def greedy_return(
                 first,
             )
         )
-    fork, policy = env.fork(), MapGreedyPolicy(snapshot.graph, hops)
-    actions = np.where(first >= 0, first, policy([fork.state()])[0])
+    fork, policy = env.fork(), CentralizedGreedyPolicy(hops)
+    actions = np.where(first >= 0, first, policy.act_state(fork.state()))
     total = float(fork.apply_actions(actions).new_interest.sum())
     while fork.agents:
-        total += float(fork.apply_actions(policy([fork.state()])[0]).new_interest.sum())
+        total += float(fork.apply_actions(policy.act_state(fork.state())).new_interest.sum())
     return total

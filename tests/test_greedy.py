@@ -7,7 +7,7 @@ import pytest
 from helpers import random_grid_graph
 
 import marl_cover
-from agents.greedy import CentralizedGreedyPolicy, GreedyPolicy, MapGreedyPolicy, greedy_return
+from agents.greedy import CentralizedGreedyPolicy, GreedyPolicy, greedy_return
 
 STAY, EAST, NORTH, WEST, SOUTH = range(5)
 
@@ -51,32 +51,6 @@ def test_centralized_gives_the_same_actions(hops: int, fallback: str) -> None:
             actions = local.act(obs)
             assert actions == central.act(env.state(), env.possible_agents)
             obs, *_ = env.step(actions)
-
-
-@pytest.mark.parametrize(("hops", "fallback"), [(2, "stay"), (5, "random")])
-def test_map_greedy_gives_the_centralized_actions(hops: int, fallback: str) -> None:
-    env = marl_cover.parallel_env(num_robots=4, hops=hops, city_size=200)
-    for seed in range(3):
-        env.reset(seed=seed)
-        central = CentralizedGreedyPolicy(hops, fallback=fallback, seed=seed)
-        on_map = MapGreedyPolicy(env.snapshot().graph, hops, fallback=fallback, seed=seed)
-        moves = 0
-        while env.agents:
-            state = env.state()
-            actions = central.act_state(state)
-            np.testing.assert_array_equal(on_map([state])[0], actions)
-            moves += int((actions > 0).sum())
-            env.apply_actions(actions)
-        assert moves > 0
-
-
-def test_map_greedy_names_a_state_of_another_map(tee_graph, path_graph) -> None:
-    env = marl_cover.parallel_env(graph=path_graph, num_robots=1, hops=7)
-    env.reset(seed=0, options={"robot_nodes": [3], "interest_nodes": [7]})
-    assert MapGreedyPolicy(path_graph, 4)([env.state()]).tolist() == [[EAST]]
-    assert MapGreedyPolicy(path_graph, 3)([env.state()]).tolist() == [[STAY]]
-    with pytest.raises(ValueError, match=r"holds 8 waypoints; this greedy policy's map has 6"):
-        MapGreedyPolicy(tee_graph, 3)([env.state()])
 
 
 @pytest.mark.parametrize("allow_swaps", [True, False])
