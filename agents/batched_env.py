@@ -27,6 +27,11 @@ key                                    shape            meaning
                                                         above plus ``robot_nodes (N, R)`` and
                                                         ``steps_left (N,)``
 ``done``, ``terminated``, ``truncated``  ``(N, 1)``     episode end (shared by the team)
+``("robot", "info", "counterfactual")``  ``(N, R, 5)``  with ``counterfactual_hops``: greedy's
+                                                        return after each robot's each move, the
+                                                        others on their actions (float32, zeros
+                                                        after a reset;
+                                                        :func:`agents.greedy.counterfactual_returns`)
 =====================================  ===============  ==========================================
 
 Seeding: after ``set_seed(s)``, the next reset of sub-environment ``i`` is
@@ -46,6 +51,7 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Binary, Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
+from agents.greedy import counterfactual_returns
 from marl_cover.config import CoverageConfig
 from marl_cover.ego import NUM_ACTIONS, NUM_NODE_FEATURES, PaddedShape
 from marl_cover.env import CoverageEnv
@@ -90,6 +96,10 @@ class BatchedCoverageEnv(EnvBase):
         observe_robots: Build every robot's ego-graph each step (off: only ``state`` and the
             action masks, for training loops whose actor reads ``state``).
         device: Where the output tensors live (the simulation runs on the CPU).
+        counterfactual_hops: With a horizon K, each step also reports, for the state it started
+            from, greedy's return (horizon K) after every robot's every move with the others on
+            their actions (coverage only; the counterfactual advantages of
+            :mod:`agents.training.mappo`).
         **overrides: Fields of :class:`marl_cover.config.CoverageConfig`.
     """
 
@@ -100,18 +110,33 @@ class BatchedCoverageEnv(EnvBase):
         *,
         observe_robots: bool = True,
         device: Any = "cpu",
+        counterfactual_hops: int | None = None,
         **overrides: Any,
     ) -> None:
         if num_envs < 1:
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
+        if counterfactual_hops is not None and counterfactual_hops < 1:
+            raise ValueError(f"counterfactual_hops must be >= 1, got {counterfactual_hops}")
         super().__init__(device=device, batch_size=torch.Size([num_envs]))
         self.envs = [CoverageEnv(config, **overrides) for _ in range(num_envs)]
         self.config = self.envs[0].config
         self.observe_robots = observe_robots
+        if counterfactual_hops is not None and self.config.task != "coverage":
+            raise ValueError(
+                f"counterfactual_hops needs the coverage task (greedy's play-outs), not "
+                f"{self.config.task!r}"
+            )
+        self.counterfactual_hops = counterfactual_hops
         self.num_robots = self.config.num_robots
         self._pending_seeds: list[int | None] = [None] * num_envs
         self._last: dict[str, np.ndarray] = {}
         self._make_specs()
+
+    @property
+    def _info_keys(self) -> tuple[str, ...]:
+        """The keys of ``(robot, info)``."""
+        extra = ("counterfactual",) if self.counterfactual_hops is not None else ()
+        return (*INFO_KEYS, *extra)
 
     @property
     def num_envs(self) -> int:
@@ -133,7 +158,12 @@ class BatchedCoverageEnv(EnvBase):
                         else Binary(shape=(n, r), dtype=dtype, device=device)
                     )
                     for key, dtype in INFO_KEYS.items()
-                },
+                }
+                | (
+                    {"counterfactual": Unbounded(shape=(n, r, NUM_ACTIONS), device=device)}
+                    if self.counterfactual_hops is not None
+                    else {}
+                ),
                 shape=(n, r),
             ),
         }
@@ -224,6 +254,11 @@ class BatchedCoverageEnv(EnvBase):
                     f"episode {i} of the batch is over; reset it (the '_reset' mask) before "
                     "stepping"
                 )
+            counterfactual = (
+                None
+                if self.counterfactual_hops is None
+                else counterfactual_returns(env, self.counterfactual_hops, action[i])
+            )
             moves = env.apply_actions(action[i].astype(np.int64))
             reward[i] = float(moves.new_interest.sum())
             terminated[i], truncated[i] = moves.terminated, moves.truncated
@@ -233,6 +268,8 @@ class BatchedCoverageEnv(EnvBase):
                 "blocked": moves.blocked,
                 "invalid_action": moves.invalid,
             }
+            if counterfactual is not None:
+                info["counterfactual"] = counterfactual.astype(np.float32)
             rows[i] = {**self._read(env), **{f"info.{k}": v for k, v in info.items()}}
         out = self._merge(rows, reset=False)
         done = terminated | truncated
@@ -268,6 +305,9 @@ class BatchedCoverageEnv(EnvBase):
                 if f"info.{key}" not in out:
                     zeros = torch.zeros((self.num_envs, self.num_robots), dtype=dtype)
                     out[f"info.{key}"] = zeros.numpy()
+            if self.counterfactual_hops is not None and "info.counterfactual" not in out:
+                shape = (self.num_envs, self.num_robots, NUM_ACTIONS)
+                out["info.counterfactual"] = np.zeros(shape, dtype=np.float32)
         self._last = out
         return out
 
@@ -277,7 +317,8 @@ class BatchedCoverageEnv(EnvBase):
             {
                 "action_mask": torch.from_numpy(out["action_mask"]),
                 "info": TensorDict(
-                    {k: torch.from_numpy(out[f"info.{k}"]) for k in INFO_KEYS}, batch_size=(n, r)
+                    {k: torch.from_numpy(out[f"info.{k}"]) for k in self._info_keys},
+                    batch_size=(n, r),
                 ),
             },
             batch_size=(n, r),

@@ -25,7 +25,7 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from marl_cover.ego import NODE_FEATURES
+from marl_cover.ego import NODE_FEATURES, NUM_ACTIONS
 
 try:  # the compiled play-out of greedy_return (optional dependency numba)
     from agents._greedy_numba import greedy_play_out as _compiled_play_out
@@ -184,32 +184,97 @@ def greedy_return(
     Raises:
         ValueError: The environment is not a coverage one, or ``compiled`` without numba.
     """
-    if env.config.task != "coverage":
-        raise ValueError(f"greedy_return plays coverage environments, not {env.config.task!r}")
-    if compiled is None:
-        compiled = _compiled_play_out is not None
-    elif compiled and _compiled_play_out is None:
-        raise ValueError("compiled greedy play-outs need numba installed")
+    compiled = _check_play_out(env, compiled, "greedy_return")
     if not env.agents:
         return 0.0
     snapshot = env.snapshot()
     first = np.full(len(snapshot.robot_node), -1, dtype=np.int64) if first is None else first
     first = np.asarray(first, dtype=np.int64)
     if compiled:
-        return float(
-            _compiled_play_out(
-                snapshot.graph.neighbors,
-                snapshot.robot_node,
-                snapshot.interest & ~snapshot.visited,
-                snapshot.max_steps - snapshot.num_steps,
-                hops,
-                env.config.allow_swaps,
-                first,
-            )
-        )
+        return _compiled_return(env, snapshot, hops, first)
     fork, policy = env.fork(), CentralizedGreedyPolicy(hops)
     actions = np.where(first >= 0, first, policy.act_state(fork.state()))
     total = float(fork.apply_actions(actions).new_interest.sum())
     while fork.agents:
         total += float(fork.apply_actions(policy.act_state(fork.state())).new_interest.sum())
     return total
+
+
+def counterfactual_returns(
+    env: Any, hops: int, joint: np.ndarray, compiled: bool | None = None
+) -> np.ndarray:
+    """Every robot's every move, the others' fixed: greedy's return after each such first step.
+
+    Entry ``[i, m]`` is :func:`greedy_return` with the first step ``joint``, except that robot
+    ``i`` plays ``m``: the team's points from the current state to the end of the episode when
+    robot ``i`` deviates to ``m`` and greedy plays every robot afterwards. A masked move is the
+    environment's counted no-op, a stay, and reads as one. Row ``i`` against the policy's
+    probabilities gives robot ``i``'s counterfactual advantage (COMA's baseline, with the
+    values simulated instead of learned; ``loss.advantage=counterfactual`` in MAPPO).
+
+    Args:
+        env: A :class:`~marl_cover.env.CoverageEnv` of the coverage task, mid-episode (left
+            unchanged).
+        hops: Greedy's horizon K.
+        joint: ``(R,)`` the team's first-step actions.
+        compiled: As in :func:`greedy_return`.
+
+    Returns:
+        ``(R, 5)`` float64 returns (zeros once the episode is over).
+
+    Raises:
+        ValueError: As :func:`greedy_return`, or ``joint`` is not one action per robot.
+    """
+    compiled = _check_play_out(env, compiled, "counterfactual_returns")
+    joint = np.asarray(joint, dtype=np.int64)
+    num_robots = env.config.num_robots
+    if joint.shape != (num_robots,):
+        raise ValueError(f"joint must hold one action per robot ({num_robots}), got {joint.shape}")
+    returns = np.zeros((num_robots, NUM_ACTIONS))
+    if not env.agents:
+        return returns
+    snapshot = env.snapshot() if compiled else None
+    played = (
+        _compiled_return(env, snapshot, hops, joint)
+        if compiled
+        else greedy_return(env, hops, joint, compiled=False)
+    )
+    for i in range(num_robots):
+        for move in range(NUM_ACTIONS):
+            if move == joint[i]:
+                returns[i, move] = played
+                continue
+            first = joint.copy()
+            first[i] = move
+            returns[i, move] = (
+                _compiled_return(env, snapshot, hops, first)
+                if compiled
+                else greedy_return(env, hops, first, compiled=False)
+            )
+    return returns
+
+
+def _check_play_out(env: Any, compiled: bool | None, name: str) -> bool:
+    """Whether to play in the kernel; refuses a task or a request that cannot be met."""
+    if env.config.task != "coverage":
+        raise ValueError(f"{name} plays coverage environments, not {env.config.task!r}")
+    if compiled is None:
+        return _compiled_play_out is not None
+    if compiled and _compiled_play_out is None:
+        raise ValueError("compiled greedy play-outs need numba installed")
+    return compiled
+
+
+def _compiled_return(env: Any, snapshot: Any, hops: int, first: np.ndarray) -> float:
+    """Greedy's return from ``snapshot`` (of ``env``) in the kernel, after ``first``."""
+    return float(
+        _compiled_play_out(
+            snapshot.graph.neighbors,
+            snapshot.robot_node,
+            snapshot.interest & ~snapshot.visited,
+            snapshot.max_steps - snapshot.num_steps,
+            hops,
+            env.config.allow_swaps,
+            first,
+        )
+    )

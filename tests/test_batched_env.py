@@ -95,6 +95,48 @@ def test_check_env_specs_and_collector(task: str) -> None:
     assert "observation" not in lean.reset()["robot"]
 
 
+def test_counterfactual_returns_of_each_step() -> None:
+    """With ``counterfactual_hops``, each step reports greedy's returns after every robot's
+    every move from the state it started from, the others on their actions: the values of
+    :func:`counterfactual_returns` on the PettingZoo environment before the same step; zeros
+    after a reset. The transitions themselves are unchanged."""
+    from agents.greedy import counterfactual_returns
+
+    num_envs, seed = 2, 4
+    batched = BatchedCoverageEnv(num_envs, counterfactual_hops=3, **CONFIG)
+    check_env_specs(batched)
+    batched.set_seed(seed)
+    envs = [parallel_env(**CONFIG) for _ in range(num_envs)]
+    td = batched.reset()
+    for i, env in enumerate(envs):
+        env.reset(seed=seed + i)
+    assert not td["robot", "info", "counterfactual"].any()
+    rng = np.random.default_rng(1)
+    varied = 0
+    for _ in range(6):  # within the first episode (max_steps 7)
+        action = rng.integers(0, 5, size=(num_envs, CONFIG["num_robots"]))
+        expected = np.stack(
+            [counterfactual_returns(env, 3, action[i]) for i, env in enumerate(envs)]
+        )
+        td["robot", "action"] = torch.from_numpy(action)
+        td = batched.step(td)
+        returns = {
+            i: env.step(dict(zip(env.agents, action[i].tolist(), strict=True)))
+            for i, env in enumerate(envs)
+        }
+        assert_same_transition(td["next"], envs, returns)
+        got = td["next", "robot", "info", "counterfactual"]
+        assert got.dtype == torch.float32
+        np.testing.assert_array_equal(got.numpy(), expected)
+        varied += int((expected.max(-1) > expected.min(-1)).sum())
+        td = batched.step_mdp(td)
+    assert varied > 3  # some robots' moves matter
+    with pytest.raises(ValueError, match="counterfactual_hops must be >= 1"):
+        BatchedCoverageEnv(2, counterfactual_hops=0, **CONFIG)
+    with pytest.raises(ValueError, match="needs the coverage task"):
+        BatchedCoverageEnv(2, counterfactual_hops=3, task="exploration", **CONFIG)
+
+
 def test_rollout_is_seeded() -> None:
     def rollout(seed: int) -> torch.Tensor:
         env = BatchedCoverageEnv(2, **CONFIG)

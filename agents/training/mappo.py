@@ -8,7 +8,13 @@ The loop (TorchRL's multi-agent PPO recipe, ``sota-implementations/multiagent/ma
 2. The reward (``loss.reward``: the team reward, or each robot's own points of interest,
    ``infos["new_interest"]``, which sum to it) is scaled by ``reward_scale``; the episode ends
    are copied onto every robot; TorchRL's GAE gives each robot's advantage and value target
-   from the critic.
+   from the critic. With ``loss.advantage="counterfactual"`` (coverage) the advantage is
+   simulated instead: the environment plays greedy out after every robot's every move, the
+   others on the moves they took (:func:`agents.greedy.counterfactual_returns`, a compiled
+   play-out of tens of microseconds), and a robot's advantage is its move's return minus the
+   sampling policy's mean over its moves (:func:`counterfactual_advantages`; COMA's
+   counterfactual baseline, with the values played out instead of learned). The critic still
+   trains, and is not used.
 3. ``epochs`` passes of ``ClipPPOLoss`` over the batch in minibatches (sampled without
    replacement from a TorchRL replay buffer), Adam, gradient clipping.
 4. Every ``eval.every`` iterations: the argmax policy on the evaluation seeds through the
@@ -91,12 +97,14 @@ class CollectorConfig:
 
 
 REWARDS = ("team", "own")
+ADVANTAGES = ("gae", "counterfactual")
 
 
 @dataclass
 class LossConfig:
     """``ClipPPOLoss`` and GAE settings (``reward``: ``"team"`` or ``"own"``; ``anchor_coef``:
-    weight of the KL divergence from the ``init`` policy, 0: off; see the module docstring)."""
+    weight of the KL divergence from the ``init`` policy, 0: off; ``advantage``: ``"gae"`` or
+    ``"counterfactual"``, simulated per-robot advantages; see the module docstring)."""
 
     gamma: float = 0.99
     lmbda: float = 0.95
@@ -107,6 +115,7 @@ class LossConfig:
     reward_scale: float = 0.1
     reward: str = "team"
     anchor_coef: float = 0.0
+    advantage: str = "gae"
 
 
 @dataclass
@@ -187,6 +196,16 @@ class MAPPOConfig:
             )
         if self.loss.reward not in REWARDS:
             raise ValueError(f"loss.reward must be one of {REWARDS}, got {self.loss.reward!r}")
+        if self.loss.advantage not in ADVANTAGES:
+            raise ValueError(
+                f"loss.advantage must be one of {ADVANTAGES}, got {self.loss.advantage!r}"
+            )
+        task = self.env.get("task", "coverage")
+        if self.loss.advantage == "counterfactual" and task != "coverage":
+            raise ValueError(
+                f"loss.advantage=counterfactual needs the coverage task (greedy's play-outs), "
+                f"not env.task={task!r}"
+            )
         if self.model.value_aggregate not in AGGREGATES:
             raise ValueError(f"model.value_aggregate must be one of {AGGREGATES}")
         if self.logger is None:  # ``logger=none`` on the command line
@@ -266,8 +285,14 @@ def make_env(config: MAPPOConfig) -> Any:
     """The batched TorchRL environment of a run."""
     from agents.batched_env import BatchedCoverageEnv
 
+    counterfactual_hops = None
+    if config.loss.advantage == "counterfactual":
+        counterfactual_hops = config.env.get("hops") or CoverageEnv(**config.env).config.hops
     return BatchedCoverageEnv(
-        config.collector.num_envs, observe_robots=config.needs_ego, **config.env
+        config.collector.num_envs,
+        observe_robots=config.needs_ego,
+        counterfactual_hops=counterfactual_hops,
+        **config.env,
     )
 
 
@@ -387,6 +412,26 @@ def prepare_batch(
     return data
 
 
+COUNTERFACTUAL_KEY = ("next", GROUP, "info", "counterfactual")
+
+
+@torch.no_grad()
+def counterfactual_advantages(actor: Any, batch: Any, reward_scale: float) -> torch.Tensor:
+    """Each robot's advantage ``(..., R, 1)`` from the environment's simulated returns.
+
+    ``Q[i, m]`` (:data:`COUNTERFACTUAL_KEY`, :func:`agents.greedy.counterfactual_returns`) is
+    the team's return when robot ``i`` plays ``m`` with the others on the actions they took and
+    greedy afterwards; the advantage of the move taken is ``Q[i, a_i] - sum_m pi(m) Q[i, m]``
+    under the sampling policy (COMA's counterfactual baseline, with the values played out
+    instead of learned), times ``reward_scale``.
+    """
+    q = batch.get(COUNTERFACTUAL_KEY)  # (..., R, 5)
+    probs = actor.get_dist(batch).probs  # (..., R, 5), zero where masked
+    taken = q.gather(-1, batch.get((GROUP, "action")).unsqueeze(-1))  # (..., R, 1)
+    baseline = (probs * q).sum(-1, keepdim=True)
+    return (taken - baseline) * reward_scale
+
+
 def episode_rewards(data: Any) -> list[float]:
     """Team rewards of the episodes that ended in a batch (the robots' credits at the end)."""
     done = data.get(("next", "done")).squeeze(-1)
@@ -488,6 +533,8 @@ def train_mappo(config: MAPPOConfig) -> dict[str, Any]:
             )
         buffer.empty()
         flat = data.reshape(-1)
+        if config.loss.advantage == "counterfactual":  # replaces GAE's (the critic still trains)
+            flat.set("advantage", counterfactual_advantages(actor, flat, config.loss.reward_scale))
         if anchor is not None:
             flat.set(ANCHOR_KEY, anchor_log_probs(anchor, flat))
         buffer.extend(flat)
