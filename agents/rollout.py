@@ -129,17 +129,33 @@ class RolloutPolicy:
         base: The base policy of the play-outs.
         sequential: Robot by robot (never worse than ``base``) or every robot against the
             base's joint action.
+        greedy_after: After this many steps of a play-out (the joint action's included),
+            greedy plays the rest (with the environment's horizon K, staying when nothing is
+            within reach: :func:`~agents.greedy.greedy_return`, a compiled play-out of tens of
+            microseconds; coverage only); ``None``: ``base`` to the end. With ``1`` the values
+            are those of :func:`~agents.greedy.counterfactual_returns`.
 
     Attributes:
         accept: After :meth:`improve`: ``(R,)`` bit masks of the moves that returned as much as
             the chosen one (bit ``a`` for action ``a``), as the routing experts record them.
         counts: ``decisions`` (robot decisions), ``changed`` (those that left the base
             policy's move) and ``play_outs``.
+
+    Raises:
+        ValueError: ``greedy_after`` is below 1.
     """
 
-    def __init__(self, base: BasePolicy, sequential: bool = True) -> None:
+    def __init__(
+        self, base: BasePolicy, sequential: bool = True, greedy_after: int | None = None
+    ) -> None:
+        if greedy_after is not None and greedy_after < 1:
+            raise ValueError(
+                f"the rollout's greedy_after must be >= 1 step (the joint action's), got "
+                f"{greedy_after}"
+            )
         self.base = base
         self.sequential = sequential
+        self.greedy_after = greedy_after
         self.accept = np.zeros(0, dtype=np.int64)
         self.counts: Counter[str] = Counter()
 
@@ -168,7 +184,7 @@ class RolloutPolicy:
                         owner.append((i, move))
             if current is None:
                 joints.insert(0, chosen.copy())
-            values = play_out(env, self.base, np.array(joints)) if joints else np.zeros(0)
+            values = self._play_outs(env, np.array(joints)) if joints else np.zeros(0)
             self.counts["play_outs"] += len(joints)
             if current is None:
                 current, values = float(values[0]), values[1:]
@@ -190,6 +206,22 @@ class RolloutPolicy:
         self.counts["decisions"] += num_robots
         self.counts["changed"] += int((chosen != base_action).sum())
         return chosen
+
+    def _play_outs(self, env: CoverageEnv, joints: np.ndarray) -> np.ndarray:
+        """The return ``(J,)`` of each joint action: ``base`` to the end, or greedy after
+        ``greedy_after`` steps."""
+        if self.greedy_after is None:
+            return play_out(env, self.base, joints)
+        from agents.greedy import greedy_return
+
+        hops = env.config.hops
+        return play_out(
+            env,
+            self.base,
+            joints,
+            steps=self.greedy_after,
+            finish=lambda rest: greedy_return(rest, hops),
+        )
 
     def act_env(self, env: CoverageEnv) -> dict[str, int]:
         """The rollout policy's actions (the evaluation harness's interface)."""

@@ -48,6 +48,11 @@ class RolloutLabelConfig:
             out on its own ego-graph (:class:`~agents.local_rollout.LocalRolloutPolicy`,
             ``margin``; a function of what the learner sees).
         margin: ``labels="local"``: moves within this much of the best logit are played out.
+        greedy_after: ``labels="rollout"`` or ``"local"``: greedy plays the play-outs after
+            this many steps (``rollout``, coverage only: >= 1, the joint action's step included;
+            ``1``: each move then greedy, :func:`agents.greedy.counterfactual_returns`, a few
+            hundred times cheaper; ``local``: as ``LocalRolloutPolicy``'s); ``None``: the
+            learner to the end.
         beta: Probability that a robot makes its labelled move instead of the learner's at a
             step (DAgger's mixing, drawn from a generator seeded with the episode's seed);
             ``1`` with ``sequential``: the episodes of the rollout policy itself.
@@ -65,6 +70,7 @@ class RolloutLabelConfig:
     sequential: bool = False
     labels: str = "rollout"
     margin: float = 1.0
+    greedy_after: int | None = None
     beta: float = 0.0
     env: dict[str, Any] = field(default_factory=lambda: {"map": "paper"})
     out: str = "outputs/rollout_labels"
@@ -81,6 +87,17 @@ class RolloutLabelConfig:
             raise ValueError(f"labels must be 'rollout', 'own' or 'local', got {self.labels!r}")
         if not self.margin >= 0:
             raise ValueError(f"margin must be >= 0, got {self.margin}")
+        if self.greedy_after is not None and (
+            self.labels == "own" or self.greedy_after < (1 if self.labels == "rollout" else 0)
+        ):
+            raise ValueError(
+                f"greedy_after must be >= 1 with labels='rollout' (>= 0 with 'local') and "
+                f"unset with 'own', got {self.greedy_after} with {self.labels!r}"
+            )
+        if self.greedy_after is not None and self.labels == "rollout" and self.task != "coverage":
+            raise ValueError(
+                f"greedy_after with labels='rollout' plays coverage only, not task={self.task!r}"
+            )
         if not 0.0 <= self.beta <= 1.0:
             raise ValueError(f"beta must be in [0, 1], got {self.beta}")
         if "task" in self.env:
@@ -164,11 +181,11 @@ def collect_rollout_labels(config: RolloutLabelConfig) -> dict[str, Any]:
     learner = GNNArgmax(model)
     rollout: Any = None
     if config.labels == "rollout":
-        rollout = RolloutPolicy(learner, config.sequential)
+        rollout = RolloutPolicy(learner, config.sequential, greedy_after=config.greedy_after)
     elif config.labels == "local":
         from agents.local_rollout import LocalRolloutPolicy
 
-        rollout = LocalRolloutPolicy(model, margin=config.margin)
+        rollout = LocalRolloutPolicy(model, margin=config.margin, greedy_after=config.greedy_after)
 
     def record_one(seed: int) -> tuple[Episode, dict[str, Any]]:
         started = time.perf_counter()

@@ -35,7 +35,8 @@ with: ``hops`` defaults to the model's (the largest of an ensemble's). ``gnn_rol
 one-step rollout policy of that GNN (``agents.rollout``: each robot's move is the one whose
 exact play-out, every robot then on the GNN's argmax, returns most; robot by robot, which is
 never worse than the GNN, or ``gnn.sequential=false`` each against the GNN's moves), an
-omniscient planner, about 22 s an episode on the paper's windows. ``gnn_local_rollout``: the
+omniscient planner, about 22 s an episode on the paper's windows (``gnn.greedy_after=1``: the
+play-outs are the joint move, then greedy; about 0.5 s an episode). ``gnn_local_rollout``: the
 decentralized one (``agents.local_rollout``): each robot plays its moves within
 ``gnn.margin`` (default 1.0) of its best logit out on its own ego-graph, its teammates in
 view and itself then on the GNN's argmax, for ``gnn.horizon`` steps (default: to the end);
@@ -99,7 +100,7 @@ class GNNOptions:
     margin: float = 1.0  # gnn_local_rollout: moves within this of the best logit are played out
     horizon: int | None = None  # gnn_local_rollout: steps of a play-out (None: to the end)
     frontier_as_interest: bool = False  # gnn_local_rollout, exploration: the frontier scores
-    greedy_after: int | None = None  # gnn_local_rollout: greedy after this many GNN moves
+    greedy_after: int | None = None  # gnn_(local_)rollout: greedy after this many GNN moves
 
 
 @dataclass
@@ -195,13 +196,19 @@ def parse_overrides(
             "(it plays out the GNN's argmax)"
         )
     default = GNNOptions()
-    planning = ("margin", "horizon", "frontier_as_interest", "greedy_after")
+    planning = ("margin", "horizon", "frontier_as_interest")
     if options.policy != "gnn_local_rollout" and any(
         getattr(gnn, name) != getattr(default, name) for name in planning
     ):
         raise SystemExit(
-            "gnn.margin, gnn.horizon, gnn.frontier_as_interest and gnn.greedy_after apply to "
+            "gnn.margin, gnn.horizon and gnn.frontier_as_interest apply to "
             "policy=gnn_local_rollout only"
+        )
+    if gnn.greedy_after is not None and not rollout:
+        raise SystemExit("gnn.greedy_after applies to policy=gnn_rollout or gnn_local_rollout")
+    if options.policy == "gnn_rollout" and gnn.greedy_after is not None and gnn.greedy_after < 1:
+        raise SystemExit(
+            f"policy=gnn_rollout needs gnn.greedy_after >= 1 (or null), got {gnn.greedy_after}"
         )
     if options.policy == "gnn_local_rollout" and not (
         gnn.margin >= 0
@@ -267,7 +274,9 @@ def make_policy(
     if options.policy == "gnn_rollout":
         from agents.rollout import GNNArgmax, RolloutPolicy
 
-        return RolloutPolicy(GNNArgmax(model), sequential=gnn.sequential)
+        return RolloutPolicy(
+            GNNArgmax(model), sequential=gnn.sequential, greedy_after=gnn.greedy_after
+        )
     if options.policy == "gnn_local_rollout":
         from agents.local_rollout import LocalRolloutPolicy
 

@@ -121,7 +121,8 @@ def test_cli_rejects_unknown_keys() -> None:
         ("policy=gnn_local_rollout gnn.horizon=0", "needs gnn.margin >= 0, gnn.horizon >= 1"),
         ("policy=gnn_local_rollout gnn.margin=-1", "got gnn.margin=-1 gnn.horizon=None"),
         ("policy=gnn_local_rollout gnn.greedy_after=-2", "gnn.greedy_after=-2"),
-        ("policy=gnn gnn.greedy_after=1", "gnn.greedy_after apply to policy=gnn_local_rollout"),
+        ("policy=gnn gnn.greedy_after=1", "gnn.greedy_after applies to policy=gnn_rollout or"),
+        ("policy=gnn_rollout gnn.greedy_after=0", "needs gnn.greedy_after >= 1 (or null), got 0"),
         ("policy=gnn_local_rollout gnn.centralized=true", "do not apply to policy=gnn_local"),
     ],
 )

@@ -53,6 +53,25 @@ def test_one_step_deviation_toward_a_point(path_graph) -> None:
     assert rollout.counts == {"play_outs": 6, "decisions": 2, "changed": 2}
 
 
+def test_greedy_finish_after_the_joint_move(path_graph) -> None:
+    """Robot on 3, points at 1, 5 and 6, three steps, a base that walks west. Played out by
+    the base, west (1 point) beats east (0); finished by greedy after the first step, east
+    reaches 5 and 6 (2 points): the values of ``counterfactual_returns``."""
+    pytest.importorskip("numba")
+    from agents.greedy import counterfactual_returns
+
+    env = path_env(path_graph, [3], [1, 5, 6], max_steps=3)
+    assert RolloutPolicy(Constant(WEST)).improve(env).tolist() == [WEST]
+    finish = RolloutPolicy(Constant(WEST), sequential=False, greedy_after=1)
+    assert finish.improve(env).tolist() == [EAST]
+    assert finish.accept.tolist() == [1 << EAST]
+    assert counterfactual_returns(env, 7, np.array([WEST])).tolist() == [[1, 2, 1, 1, 1]]
+    # two steps of the base first: west, west reaches 1; east then west reaches nothing
+    assert RolloutPolicy(Constant(WEST), greedy_after=2).improve(env).tolist() == [WEST]
+    with pytest.raises(ValueError, match="greedy_after must be >= 1 step"):
+        RolloutPolicy(Constant(WEST), greedy_after=0)
+
+
 def test_ties_keep_the_base_move(path_graph) -> None:
     # points far east; the base walks west and no single step changes what it collects
     env = path_env(path_graph, [3], [6, 7], max_steps=3)
@@ -189,6 +208,14 @@ def test_cli_plays_the_rollout_policy(tmp_path, random_model_file) -> None:
         assert result.returncode == 0, result.stderr
         rewards[policy] = [r["reward"] for r in json.loads(out.read_text())["summary"]["results"]]
     assert all(r >= g for r, g in zip(rewards["gnn_rollout"], rewards["gnn"], strict=True))
+    out = tmp_path / "finish.json"
+    finish = ("policy=gnn_rollout", "gnn.greedy_after=1", "gnn.sequential=false", f"out={out}")
+    common = (f"checkpoint={random_model_file}", "episodes=3", "num_robots=3", "max_steps=8")
+    result = run_script("evaluate.py", *finish, *common, "city_size=80")
+    assert result.returncode == 0, result.stderr
+    record = json.loads(out.read_text())
+    assert record["gnn"]["greedy_after"] == 1
+    assert record["summary"]["policy_counts"]["play_outs"] > 0
     refused = run_script("evaluate.py", "policy=gnn_rollout", "checkpoint=a.pt,b.pt")
     assert refused.returncode != 0 and "not an ensemble" in refused.stderr
 
@@ -232,6 +259,12 @@ def test_own_labels_are_the_learners_moves() -> None:
         RolloutLabelConfig(labels="local", margin=-1.0)
     with pytest.raises(FileNotFoundError, match=r"no model file at nowhere.pt \(checkpoint\)"):
         RolloutLabelConfig(checkpoint="nowhere.pt")
+    for options in ({"greedy_after": 0}, {"labels": "own", "greedy_after": 1}):
+        with pytest.raises(ValueError, match="greedy_after must be >= 1 with labels='rollout'"):
+            RolloutLabelConfig(**options)
+    with pytest.raises(ValueError, match="plays coverage only, not task='exploration'"):
+        RolloutLabelConfig(task="exploration", greedy_after=1)
+    assert RolloutLabelConfig(labels="local", greedy_after=0).greedy_after == 0
 
 
 def test_play_outs_cut_short_and_finished_by_another_policy(path_graph) -> None:
