@@ -38,7 +38,7 @@ import numpy as np
 
 from agents.greedy import greedy_return
 from agents.models.policy import GNNPolicy
-from agents.rollout import BasePolicy, GNNArgmax, play_out
+from agents.rollout import BasePolicy, GNNArgmax, play_out_greedy_finish
 from agents.spread import teammate_waypoints
 from marl_cover.config import CoverageConfig
 from marl_cover.ego import NODE_FEATURES, NUM_EGO_ACTION_EDGES
@@ -235,12 +235,4 @@ class LocalRolloutPolicy(GNNPolicy):
         joint = np.asarray(self.base([world.state()])[0])  # (1 + T,) the base in that world
         joints = np.repeat(joint[None, :], len(candidates), axis=0)  # (C, 1 + T)
         joints[:, 0] = candidates
-        if self.greedy_after is None:
-            return play_out(world, self.base, joints)
-        return play_out(
-            world,
-            self.base,
-            joints,
-            steps=self.greedy_after,
-            finish=lambda rest: greedy_return(rest, hops),
-        )
+        return play_out_greedy_finish(world, self.base, joints, self.greedy_after, hops)

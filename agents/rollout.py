@@ -122,6 +122,25 @@ def play_out(
     return totals
 
 
+def play_out_greedy_finish(
+    env: CoverageEnv,
+    base: BasePolicy,
+    joints: np.ndarray,
+    greedy_after: int | None,
+    hops: int,
+) -> np.ndarray:
+    """:func:`play_out` with ``base`` for ``greedy_after`` steps (the joint action's
+    included) and greedy with horizon ``hops`` to the end (:func:`agents.greedy.greedy_return`);
+    ``greedy_after=None``: ``base`` to the end."""
+    if greedy_after is None:
+        return play_out(env, base, joints)
+    from agents.greedy import greedy_return
+
+    return play_out(
+        env, base, joints, steps=greedy_after, finish=lambda rest: greedy_return(rest, hops)
+    )
+
+
 class RolloutPolicy:
     """The one-step rollout policy of a base policy (see the module docstring).
 
@@ -210,18 +229,7 @@ class RolloutPolicy:
     def _play_outs(self, env: CoverageEnv, joints: np.ndarray) -> np.ndarray:
         """The return ``(J,)`` of each joint action: ``base`` to the end, or greedy after
         ``greedy_after`` steps."""
-        if self.greedy_after is None:
-            return play_out(env, self.base, joints)
-        from agents.greedy import greedy_return
-
-        hops = env.config.hops
-        return play_out(
-            env,
-            self.base,
-            joints,
-            steps=self.greedy_after,
-            finish=lambda rest: greedy_return(rest, hops),
-        )
+        return play_out_greedy_finish(env, self.base, joints, self.greedy_after, env.config.hops)
 
     def act_env(self, env: CoverageEnv) -> dict[str, int]:
         """The rollout policy's actions (the evaluation harness's interface)."""

@@ -45,6 +45,19 @@ def assert_same_transition(td, envs, returns) -> None:  # noqa: ANN001
             assert bool(td["done"][i]) == (terminated or truncated)
 
 
+def step_both(batched, td, envs, action):  # noqa: ANN001, ANN201
+    """Steps the batched env and the PettingZoo envs with the same ``(N, R)`` actions, checks
+    that the transitions agree, and returns the batched env's TensorDict."""
+    td["robot", "action"] = torch.from_numpy(action)
+    td = batched.step(td)
+    returns = {
+        i: env.step(dict(zip(env.agents, action[i].tolist(), strict=True)))
+        for i, env in enumerate(envs)
+    }
+    assert_same_transition(td["next"], envs, returns)
+    return td
+
+
 @pytest.mark.parametrize(
     ("allow_swaps", "task"), [(True, "coverage"), (False, "coverage"), (True, "exploration")]
 )
@@ -59,13 +72,7 @@ def test_same_transitions_as_pettingzoo(allow_swaps: bool, task: str) -> None:
     episodes_ended = 0
     for _ in range(24):  # several episode ends, with resets of some sub-environments only
         action = rng.integers(0, 5, size=(num_envs, CONFIG["num_robots"]))
-        td["robot", "action"] = torch.from_numpy(action)
-        td = batched.step(td)
-        returns = {
-            i: env.step(dict(zip(env.agents, action[i].tolist(), strict=True)))
-            for i, env in enumerate(envs)
-        }
-        assert_same_transition(td["next"], envs, returns)
+        td = step_both(batched, td, envs, action)
         done = td["next", "done"].flatten()
         episodes_ended += int(done.sum())
         td = batched.step_mdp(td)
@@ -118,13 +125,7 @@ def test_counterfactual_returns_of_each_step() -> None:
         expected = np.stack(
             [counterfactual_returns(env, 3, action[i]) for i, env in enumerate(envs)]
         )
-        td["robot", "action"] = torch.from_numpy(action)
-        td = batched.step(td)
-        returns = {
-            i: env.step(dict(zip(env.agents, action[i].tolist(), strict=True)))
-            for i, env in enumerate(envs)
-        }
-        assert_same_transition(td["next"], envs, returns)
+        td = step_both(batched, td, envs, action)
         got = td["next", "robot", "info", "counterfactual"]
         assert got.dtype == torch.float32
         np.testing.assert_array_equal(got.numpy(), expected)
