@@ -9,10 +9,13 @@ TorchRL collection (case a's task, every robot's ego-graph and the state in ever
 actions from the action spec, a TorchRL ``Collector``): (d) the batched environment
 (:class:`agents.batched_env.BatchedCoverageEnv`, ``--num-envs`` episodes per step) beside
 (e) TorchRL's ``PettingZooWrapper`` around the PettingZoo env; frames are env steps, and the
-ratio d / e is measured in the same run. Prints a table and writes JSON.
+ratio d / e is measured in the same run. (h): case d's env also reporting greedy's return after
+every robot's every move (``counterfactual_hops=19``, what MAPPO's
+``loss.advantage=counterfactual`` collects); no target, its cost beside d.
+Prints a table and writes JSON.
 
     python scripts/bench_env.py [--seconds 5] [--backend auto|numpy|numba] [--num-envs 16]
-                                [--cases a b c d e f g] [--out outputs/bench_env.json]
+                                [--cases a b c d e f g h] [--out outputs/bench_env.json]
 
 ``--cases`` runs the named cases only (``d`` and ``e`` run together: their ratio is one
 measurement). Each case's JSON entry holds its target (``null`` where it has none) and whether
@@ -57,7 +60,7 @@ CASES = {
 TARGETS = {"a": 5000.0, "b": 100.0, "d": 2000.0, "f": 3000.0, "g": 60.0}
 #: The batched env's collection must be this many times faster than the wrapper's (d / e).
 RATIO_TARGET = 10.0
-LETTERS = ("a", "b", "c", "d", "e", "f", "g")
+LETTERS = ("a", "b", "c", "d", "e", "f", "g", "h")
 COLLECTION: dict[str, Any] = {"map": "paper", "num_robots": 4, "hops": 19}
 
 
@@ -148,6 +151,24 @@ def collection_cases(seconds: float, num_envs: int, backend: str) -> dict:
     }
 
 
+def counterfactual_case(seconds: float, num_envs: int, backend: str) -> dict:
+    """Case h: case d's env with the counterfactual returns of every step."""
+    import torch
+
+    from agents.batched_env import BatchedCoverageEnv
+
+    torch.set_num_threads(1)
+    config = {**COLLECTION, "ego_backend": backend}
+    hops = COLLECTION["hops"]
+    batched = BatchedCoverageEnv(num_envs, counterfactual_hops=hops, **config)
+    return {
+        f"h: d + counterfactual returns x{num_envs}": {
+            "config": {**config, "num_envs": num_envs, "counterfactual_hops": hops},
+            **bench_collector(batched, num_envs * 50, seconds),
+        }
+    }
+
+
 def print_row(
     name: str, env_steps: float, agent_steps: float, obs_mb: str = "", peak_mb: str = ""
 ) -> None:
@@ -183,10 +204,10 @@ def main() -> None:
         "--cases", nargs="+", choices=LETTERS, default=list(LETTERS), help="cases to run"
     )
     parser.add_argument(
-        "--skip-collectors", action="store_true", help="PettingZoo cases only (no d, e)"
+        "--skip-collectors", action="store_true", help="PettingZoo cases only (no d, e, h)"
     )
     args = parser.parse_args()
-    cases = set(args.cases) - ({"d", "e"} if args.skip_collectors else set())
+    cases = set(args.cases) - ({"d", "e", "h"} if args.skip_collectors else set())
     results: dict[str, Any] = {}
     print(
         f"{'case':<38} {'env steps/s':>12} {'agent-steps/s':>14} {'obs MB/step':>12} "
@@ -226,6 +247,16 @@ def main() -> None:
                 "meets_target": d / e >= RATIO_TARGET,
             }
             print(f"{f'ratio d / e (target >= {RATIO_TARGET:.0f})':<38} {d / e:12.1f}")
+    if "h" in cases:
+        try:
+            counterfactual = counterfactual_case(args.seconds, args.num_envs, args.backend)
+        except FileNotFoundError as error:
+            counterfactual = {}
+            print(f"{'h: counterfactual returns':<38} skipped: {error}")
+        for name, result in counterfactual.items():
+            results[name] = with_target(name, result, result["frames_per_s"])
+            frames = result["frames_per_s"]
+            print_row(name, frames, frames * COLLECTION["num_robots"])
     write_text_atomic(args.out, json.dumps(results, indent=2))
     print(f"wrote {args.out}")
 

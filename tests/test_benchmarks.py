@@ -70,6 +70,22 @@ def test_bench_env_collection_ratio_is_measured_in_the_same_run(tmp_path: Path) 
 
 
 @pytest.mark.usefixtures("paper_map_available")
+def test_bench_env_times_the_counterfactual_returns_alone(tmp_path: Path) -> None:
+    """Case h runs without d and e: whole batches of the env that reports counterfactual
+    returns, with no target."""
+    out = tmp_path / "bench_env.json"
+    args = ["--seconds", "0.2", "--cases", "h", "--num-envs", "2", "--out", str(out)]
+    done = run_script("bench_env.py", *args)
+    assert done.returncode == 0, done.stderr
+    results = json.loads(out.read_text())
+    assert list(results) == ["h: d + counterfactual returns x2"]
+    (result,) = results.values()
+    assert result["config"]["counterfactual_hops"] == 19 and result["frames"] % 100 == 0
+    assert result["frames_per_s"] == pytest.approx(result["frames"] / result["seconds"])
+    assert result["target"] is None and result["meets_target"] is None
+
+
+@pytest.mark.usefixtures("paper_map_available")
 def test_bench_gnn_times_one_controller_in_every_mode(tmp_path: Path) -> None:
     """One row per model kind and case (4 robots at each K, then 100 robots at K = 19), the
     paper's time beside K = 9 and 19, a checkpoint's row at its own K, and the modes' logits
