@@ -14,7 +14,9 @@ The loop (TorchRL's multi-agent PPO recipe, ``sota-implementations/multiagent/ma
    play-out of tens of microseconds), and a robot's advantage is its move's return minus the
    sampling policy's mean over its moves (:func:`counterfactual_advantages`; COMA's
    counterfactual baseline, with the values played out instead of learned). The critic still
-   trains, and is not used.
+   trains, and is not used. ``loss.all_actions`` takes PPO's clipped surrogate in expectation
+   over each robot's moves (:func:`all_action_objective`), so that every move's value counts
+   at every state, not only the sampled move's.
 3. ``epochs`` passes of ``ClipPPOLoss`` over the batch in minibatches (sampled without
    replacement from a TorchRL replay buffer), Adam, gradient clipping.
 4. Every ``eval.every`` iterations: the argmax policy on the evaluation seeds through the
@@ -104,7 +106,10 @@ ADVANTAGES = ("gae", "counterfactual")
 class LossConfig:
     """``ClipPPOLoss`` and GAE settings (``reward``: ``"team"`` or ``"own"``; ``anchor_coef``:
     weight of the KL divergence from the ``init`` policy, 0: off; ``advantage``: ``"gae"`` or
-    ``"counterfactual"``, simulated per-robot advantages; see the module docstring)."""
+    ``"counterfactual"``, simulated per-robot advantages; ``all_actions``: with
+    ``"counterfactual"``, the clipped objective is taken in expectation over every move of a
+    robot instead of at the sampled one, :func:`all_action_objective`; see the module
+    docstring)."""
 
     gamma: float = 0.99
     lmbda: float = 0.95
@@ -116,6 +121,7 @@ class LossConfig:
     reward: str = "team"
     anchor_coef: float = 0.0
     advantage: str = "gae"
+    all_actions: bool = False
 
 
 @dataclass
@@ -200,6 +206,8 @@ class MAPPOConfig:
             raise ValueError(
                 f"loss.advantage must be one of {ADVANTAGES}, got {self.loss.advantage!r}"
             )
+        if self.loss.all_actions and self.loss.advantage != "counterfactual":
+            raise ValueError("loss.all_actions needs loss.advantage=counterfactual")
         task = self.env.get("task", "coverage")
         if self.loss.advantage == "counterfactual" and task != "coverage":
             raise ValueError(
@@ -432,6 +440,43 @@ def counterfactual_advantages(actor: Any, batch: Any, reward_scale: float) -> to
     return (taken - baseline) * reward_scale
 
 
+OLD_LOGITS_KEY = (GROUP, "old_logits")
+ALL_ADVANTAGES_KEY = (GROUP, "all_advantages")
+
+
+@torch.no_grad()
+def all_action_advantages(actor: Any, batch: Any, reward_scale: float) -> None:
+    """Stores, once per batch, the sampling policy's logits ``(..., R, 5)`` (``-inf`` where
+    masked) and every move's counterfactual advantage ``(..., R, 5)``: ``Q[i, m] - sum_m'
+    pi(m') Q[i, m']`` times ``reward_scale``, for :func:`all_action_objective`."""
+    q = batch.get(COUNTERFACTUAL_KEY)  # (..., R, 5)
+    logits = actor.get_dist(batch).logits
+    baseline = (logits.softmax(-1) * q).sum(-1, keepdim=True)
+    batch.set(OLD_LOGITS_KEY, logits)
+    batch.set(ALL_ADVANTAGES_KEY, (q - baseline) * reward_scale)
+
+
+def all_action_objective(actor: Any, batch: Any, clip_epsilon: float) -> torch.Tensor:
+    """PPO's clipped surrogate in expectation over each robot's moves under the sampling
+    policy, ``-sum_m pi_old(m) min(r_m A_m, clip(r_m, 1 - eps, 1 + eps) A_m)``, averaged over
+    the robots of the batch (``r_m``: the probability ratio of move ``m``; ``A_m``: its
+    advantage from :func:`all_action_advantages`, divided by their standard deviation over the
+    allowed moves of the batch). Its expectation over sampled moves is the single-sample
+    objective of ``ClipPPOLoss``; it reads every move's simulated value instead of one."""
+    old = batch.get(OLD_LOGITS_KEY)  # (..., R, 5)
+    allowed = old > -torch.inf
+    advantage = batch.get(ALL_ADVANTAGES_KEY)
+    scale = advantage[allowed].std().clamp_min(1e-8)
+    advantage = torch.where(allowed, advantage / scale, torch.zeros_like(advantage))
+    current = actor.get_dist(batch).logits
+    log_ratio = (current.log_softmax(-1) - old.log_softmax(-1)).masked_fill(~allowed, 0.0)
+    ratio = log_ratio.exp()
+    clipped = ratio.clamp(1 - clip_epsilon, 1 + clip_epsilon)
+    surrogate = torch.minimum(ratio * advantage, clipped * advantage)
+    weights = old.softmax(-1)  # zero where masked
+    return -(weights * surrogate).sum(-1).mean()
+
+
 def episode_rewards(data: Any) -> list[float]:
     """Team rewards of the episodes that ended in a batch (the robots' credits at the end)."""
     done = data.get(("next", "done")).squeeze(-1)
@@ -535,6 +580,8 @@ def train_mappo(config: MAPPOConfig) -> dict[str, Any]:
         flat = data.reshape(-1)
         if config.loss.advantage == "counterfactual":  # replaces GAE's (the critic still trains)
             flat.set("advantage", counterfactual_advantages(actor, flat, config.loss.reward_scale))
+            if config.loss.all_actions:
+                all_action_advantages(actor, flat, config.loss.reward_scale)
         if anchor is not None:
             flat.set(ANCHOR_KEY, anchor_log_probs(anchor, flat))
         buffer.extend(flat)
@@ -543,7 +590,9 @@ def train_mappo(config: MAPPOConfig) -> dict[str, Any]:
                 group["lr"] = base * (1 - iteration / c.n_iters)
         actor_frozen = iteration < config.optim.critic_warmup_iters
         anchored = actor if anchor is not None else None
-        metrics = _update(loss_module, optimizer, buffer, config, actor_frozen, anchored)
+        metrics = _update(
+            loss_module, optimizer, buffer, config, actor_frozen, anchored, actor=actor
+        )
         collector.update_policy_weights_()
         iteration += 1
         frames = iteration * c.frames_per_batch
@@ -636,9 +685,11 @@ def _update(
     config: MAPPOConfig,
     actor_frozen: bool,
     anchored: Any | None = None,
+    actor: Any | None = None,
 ) -> dict[str, float]:
     """``epochs`` passes of PPO over the buffer; mean losses of the last pass. ``anchored``:
-    the actor, when the buffer holds the anchor's log-probabilities (``None``: no anchor)."""
+    the actor, when the buffer holds the anchor's log-probabilities (``None``: no anchor);
+    ``actor``: the actor, read by the objective of ``loss.all_actions``."""
     steps = max(1, len(buffer) // config.optim.minibatch_size)
     totals: dict[str, float] = {}
     for _ in range(config.optim.epochs):
@@ -646,6 +697,9 @@ def _update(
         for _ in range(steps):
             batch = buffer.sample()
             losses = loss_module(batch)
+            if config.loss.all_actions and actor is not None:
+                clip = config.loss.clip_epsilon
+                losses["loss_objective"] = all_action_objective(actor, batch, clip)
             if actor_frozen:
                 total = losses["loss_critic"]
             else:
