@@ -187,6 +187,21 @@ def with_target(name: str, result: dict, rate: float) -> dict:
     return {**result, "target": target, "meets_target": None if target is None else rate >= target}
 
 
+def run_collection(cases, label: str, args: argparse.Namespace, results: dict) -> dict:  # noqa: ANN001
+    """Runs collection ``cases(seconds, num_envs, backend)`` (skipped without the paper's map),
+    prints their rows and adds them to ``results``; returns them."""
+    try:
+        collected = cases(args.seconds, args.num_envs, args.backend)
+    except FileNotFoundError as error:
+        print(f"{label:<38} skipped: {error}")
+        return {}
+    for name, result in collected.items():
+        results[name] = with_target(name, result, result["frames_per_s"])
+        frames = result["frames_per_s"]
+        print_row(name, frames, frames * COLLECTION["num_robots"])
+    return collected
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=positive_float, default=5.0)
@@ -230,15 +245,7 @@ def main() -> None:
             f"{result['step_peak_mb']:.2f}",
         )
     if cases & {"d", "e"}:
-        try:
-            collected = collection_cases(args.seconds, args.num_envs, args.backend)
-        except FileNotFoundError as error:
-            collected = {}
-            print(f"{'d, e: TorchRL collection':<38} skipped: {error}")
-        for name, result in collected.items():
-            results[name] = with_target(name, result, result["frames_per_s"])
-            frames = result["frames_per_s"]
-            print_row(name, frames, frames * COLLECTION["num_robots"])
+        collected = run_collection(collection_cases, "d, e: TorchRL collection", args, results)
         if len(collected) == 2:
             d, e = (r["frames_per_s"] for r in collected.values())
             results["ratio d / e"] = {
@@ -248,15 +255,7 @@ def main() -> None:
             }
             print(f"{f'ratio d / e (target >= {RATIO_TARGET:.0f})':<38} {d / e:12.1f}")
     if "h" in cases:
-        try:
-            counterfactual = counterfactual_case(args.seconds, args.num_envs, args.backend)
-        except FileNotFoundError as error:
-            counterfactual = {}
-            print(f"{'h: counterfactual returns':<38} skipped: {error}")
-        for name, result in counterfactual.items():
-            results[name] = with_target(name, result, result["frames_per_s"])
-            frames = result["frames_per_s"]
-            print_row(name, frames, frames * COLLECTION["num_robots"])
+        run_collection(counterfactual_case, "h: counterfactual returns", args, results)
     write_text_atomic(args.out, json.dumps(results, indent=2))
     print(f"wrote {args.out}")
 
