@@ -127,16 +127,16 @@ class BatchedCoverageEnv(EnvBase):
                 f"{self.config.task!r}"
             )
         self.counterfactual_hops = counterfactual_hops
+        #: ``(robot, info)`` entries: dtype and the shape after ``(N, R)``.
+        self._info: dict[str, tuple[torch.dtype, tuple[int, ...]]] = {
+            key: (dtype, ()) for key, dtype in INFO_KEYS.items()
+        }
+        if counterfactual_hops is not None:
+            self._info["counterfactual"] = (torch.float32, (NUM_ACTIONS,))
         self.num_robots = self.config.num_robots
         self._pending_seeds: list[int | None] = [None] * num_envs
         self._last: dict[str, np.ndarray] = {}
         self._make_specs()
-
-    @property
-    def _info_keys(self) -> tuple[str, ...]:
-        """The keys of ``(robot, info)``."""
-        extra = ("counterfactual",) if self.counterfactual_hops is not None else ()
-        return (*INFO_KEYS, *extra)
 
     @property
     def num_envs(self) -> int:
@@ -153,17 +153,12 @@ class BatchedCoverageEnv(EnvBase):
             "info": Composite(
                 {
                     key: (
-                        Unbounded(shape=(n, r), dtype=dtype, device=device)
-                        if dtype == torch.int64
-                        else Binary(shape=(n, r), dtype=dtype, device=device)
+                        Binary(shape=(n, r, *tail), dtype=dtype, device=device)
+                        if dtype == torch.bool
+                        else Unbounded(shape=(n, r, *tail), dtype=dtype, device=device)
                     )
-                    for key, dtype in INFO_KEYS.items()
-                }
-                | (
-                    {"counterfactual": Unbounded(shape=(n, r, NUM_ACTIONS), device=device)}
-                    if self.counterfactual_hops is not None
-                    else {}
-                ),
+                    for key, (dtype, tail) in self._info.items()
+                },
                 shape=(n, r),
             ),
         }
@@ -301,13 +296,10 @@ class BatchedCoverageEnv(EnvBase):
                     array[i] = row.get(key, 0)
                 out[key] = array
         if reset:  # the infos of a fresh episode are zeros (kept rows were zeroed above)
-            for key, dtype in INFO_KEYS.items():
+            for key, (dtype, tail) in self._info.items():
                 if f"info.{key}" not in out:
-                    zeros = torch.zeros((self.num_envs, self.num_robots), dtype=dtype)
+                    zeros = torch.zeros((self.num_envs, self.num_robots, *tail), dtype=dtype)
                     out[f"info.{key}"] = zeros.numpy()
-            if self.counterfactual_hops is not None and "info.counterfactual" not in out:
-                shape = (self.num_envs, self.num_robots, NUM_ACTIONS)
-                out["info.counterfactual"] = np.zeros(shape, dtype=np.float32)
         self._last = out
         return out
 
@@ -317,7 +309,7 @@ class BatchedCoverageEnv(EnvBase):
             {
                 "action_mask": torch.from_numpy(out["action_mask"]),
                 "info": TensorDict(
-                    {k: torch.from_numpy(out[f"info.{k}"]) for k in self._info_keys},
+                    {k: torch.from_numpy(out[f"info.{k}"]) for k in self._info},
                     batch_size=(n, r),
                 ),
             },

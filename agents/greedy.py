@@ -187,11 +187,11 @@ def greedy_return(
     compiled = _check_play_out(env, compiled, "greedy_return")
     if not env.agents:
         return 0.0
-    snapshot = env.snapshot()
-    first = np.full(len(snapshot.robot_node), -1, dtype=np.int64) if first is None else first
+    num_robots = env.config.num_robots
+    first = np.full(num_robots, -1, dtype=np.int64) if first is None else first
     first = np.asarray(first, dtype=np.int64)
     if compiled:
-        return _compiled_return(env, snapshot, hops, first)
+        return _compiled_return(env, env.snapshot(), hops, first)
     fork, policy = env.fork(), CentralizedGreedyPolicy(hops)
     actions = np.where(first >= 0, first, policy.act_state(fork.state()))
     total = float(fork.apply_actions(actions).new_interest.sum())
@@ -233,24 +233,22 @@ def counterfactual_returns(
     returns = np.zeros((num_robots, NUM_ACTIONS))
     if not env.agents:
         return returns
-    snapshot = env.snapshot() if compiled else None
-    played = (
-        _compiled_return(env, snapshot, hops, joint)
-        if compiled
-        else greedy_return(env, hops, joint, compiled=False)
-    )
+    if compiled:
+        snapshot = env.snapshot()  # one for all the play-outs
+
+        def value(first: np.ndarray) -> float:
+            return _compiled_return(env, snapshot, hops, first)
+    else:
+
+        def value(first: np.ndarray) -> float:
+            return greedy_return(env, hops, first, compiled=False)
+
+    played = value(joint)
     for i in range(num_robots):
         for move in range(NUM_ACTIONS):
-            if move == joint[i]:
-                returns[i, move] = played
-                continue
             first = joint.copy()
             first[i] = move
-            returns[i, move] = (
-                _compiled_return(env, snapshot, hops, first)
-                if compiled
-                else greedy_return(env, hops, first, compiled=False)
-            )
+            returns[i, move] = played if move == joint[i] else value(first)
     return returns
 
 

@@ -27,7 +27,6 @@ from agents.training.mappo import (  # noqa: E402
     COUNTERFACTUAL_KEY,
     OLD_LOGITS_KEY,
     MAPPOConfig,
-    all_action_advantages,
     all_action_objective,
     anchor_kl,
     anchor_log_probs,
@@ -242,7 +241,7 @@ def test_all_action_objective_is_the_expected_clipped_surrogate(tmp_path: Path) 
     batch = env.rollout(6, break_when_any_done=False).reshape(-1)
     gnn = AggregationGNN(GNNConfig(kind="linear", hops=3))
     actor = build_actor(gnn, tiny_config(tmp_path), 3)
-    all_action_advantages(actor, batch, 0.1)
+    counterfactual_advantages(actor, batch, 0.1, keep_all=True)
     old, advantage = batch[OLD_LOGITS_KEY], batch[ALL_ADVANTAGES_KEY]
     allowed = batch["robot", "action_mask"]
     assert torch.equal(old > -torch.inf, allowed)

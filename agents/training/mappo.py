@@ -423,46 +423,43 @@ def prepare_batch(
 COUNTERFACTUAL_KEY = ("next", GROUP, "info", "counterfactual")
 
 
+OLD_LOGITS_KEY = (GROUP, "old_logits")
+ALL_ADVANTAGES_KEY = (GROUP, "all_advantages")
+
+
 @torch.no_grad()
-def counterfactual_advantages(actor: Any, batch: Any, reward_scale: float) -> torch.Tensor:
+def counterfactual_advantages(
+    actor: Any, batch: Any, reward_scale: float, keep_all: bool = False
+) -> torch.Tensor:
     """Each robot's advantage ``(..., R, 1)`` from the environment's simulated returns.
 
     ``Q[i, m]`` (:data:`COUNTERFACTUAL_KEY`, :func:`agents.greedy.counterfactual_returns`) is
     the team's return when robot ``i`` plays ``m`` with the others on the actions they took and
     greedy afterwards; the advantage of the move taken is ``Q[i, a_i] - sum_m pi(m) Q[i, m]``
     under the sampling policy (COMA's counterfactual baseline, with the values played out
-    instead of learned), times ``reward_scale``.
+    instead of learned), times ``reward_scale``. With ``keep_all`` the batch also stores, for
+    :func:`all_action_objective`, the sampling policy's logits ``(..., R, 5)`` (``-inf`` where
+    masked) at :data:`OLD_LOGITS_KEY` and every move's advantage ``(..., R, 5)`` at
+    :data:`ALL_ADVANTAGES_KEY`.
     """
     q = batch.get(COUNTERFACTUAL_KEY)  # (..., R, 5)
-    probs = actor.get_dist(batch).probs  # (..., R, 5), zero where masked
-    taken = q.gather(-1, batch.get((GROUP, "action")).unsqueeze(-1))  # (..., R, 1)
-    baseline = (probs * q).sum(-1, keepdim=True)
-    return (taken - baseline) * reward_scale
-
-
-OLD_LOGITS_KEY = (GROUP, "old_logits")
-ALL_ADVANTAGES_KEY = (GROUP, "all_advantages")
-
-
-@torch.no_grad()
-def all_action_advantages(actor: Any, batch: Any, reward_scale: float) -> None:
-    """Stores, once per batch, the sampling policy's logits ``(..., R, 5)`` (``-inf`` where
-    masked) and every move's counterfactual advantage ``(..., R, 5)``: ``Q[i, m] - sum_m'
-    pi(m') Q[i, m']`` times ``reward_scale``, for :func:`all_action_objective`."""
-    q = batch.get(COUNTERFACTUAL_KEY)  # (..., R, 5)
-    logits = actor.get_dist(batch).logits
-    baseline = (logits.softmax(-1) * q).sum(-1, keepdim=True)
-    batch.set(OLD_LOGITS_KEY, logits)
-    batch.set(ALL_ADVANTAGES_KEY, (q - baseline) * reward_scale)
+    dist = actor.get_dist(batch)
+    baseline = (dist.probs * q).sum(-1, keepdim=True)  # probabilities zero where masked
+    every = (q - baseline) * reward_scale  # (..., R, 5)
+    if keep_all:
+        batch.set(OLD_LOGITS_KEY, dist.logits)
+        batch.set(ALL_ADVANTAGES_KEY, every)
+    return every.gather(-1, batch.get((GROUP, "action")).unsqueeze(-1))  # (..., R, 1)
 
 
 def all_action_objective(actor: Any, batch: Any, clip_epsilon: float) -> torch.Tensor:
     """PPO's clipped surrogate in expectation over each robot's moves under the sampling
     policy, ``-sum_m pi_old(m) min(r_m A_m, clip(r_m, 1 - eps, 1 + eps) A_m)``, averaged over
     the robots of the batch (``r_m``: the probability ratio of move ``m``; ``A_m``: its
-    advantage from :func:`all_action_advantages`, divided by their standard deviation over the
-    allowed moves of the batch). Its expectation over sampled moves is the single-sample
-    objective of ``ClipPPOLoss``; it reads every move's simulated value instead of one."""
+    advantage from :func:`counterfactual_advantages` with ``keep_all``, divided by their
+    standard deviation over the allowed moves of the batch). Its expectation over sampled
+    moves is the single-sample objective of ``ClipPPOLoss``; it reads every move's simulated
+    value instead of one."""
     old = batch.get(OLD_LOGITS_KEY)  # (..., R, 5)
     allowed = old > -torch.inf
     advantage = batch.get(ALL_ADVANTAGES_KEY)
@@ -579,9 +576,9 @@ def train_mappo(config: MAPPOConfig) -> dict[str, Any]:
         buffer.empty()
         flat = data.reshape(-1)
         if config.loss.advantage == "counterfactual":  # replaces GAE's (the critic still trains)
-            flat.set("advantage", counterfactual_advantages(actor, flat, config.loss.reward_scale))
-            if config.loss.all_actions:
-                all_action_advantages(actor, flat, config.loss.reward_scale)
+            loss = config.loss
+            advantage = counterfactual_advantages(actor, flat, loss.reward_scale, loss.all_actions)
+            flat.set("advantage", advantage)
         if anchor is not None:
             flat.set(ANCHOR_KEY, anchor_log_probs(anchor, flat))
         buffer.extend(flat)
@@ -589,10 +586,7 @@ def train_mappo(config: MAPPOConfig) -> dict[str, Any]:
             for group, base in zip(optimizer.param_groups, base_lrs, strict=True):
                 group["lr"] = base * (1 - iteration / c.n_iters)
         actor_frozen = iteration < config.optim.critic_warmup_iters
-        anchored = actor if anchor is not None else None
-        metrics = _update(
-            loss_module, optimizer, buffer, config, actor_frozen, anchored, actor=actor
-        )
+        metrics = _update(loss_module, optimizer, buffer, config, actor_frozen, actor)
         collector.update_policy_weights_()
         iteration += 1
         frames = iteration * c.frames_per_batch
@@ -684,12 +678,11 @@ def _update(
     buffer: Any,
     config: MAPPOConfig,
     actor_frozen: bool,
-    anchored: Any | None = None,
-    actor: Any | None = None,
+    actor: Any,
 ) -> dict[str, float]:
-    """``epochs`` passes of PPO over the buffer; mean losses of the last pass. ``anchored``:
-    the actor, when the buffer holds the anchor's log-probabilities (``None``: no anchor);
-    ``actor``: the actor, read by the objective of ``loss.all_actions``."""
+    """``epochs`` passes of PPO over the buffer; mean losses of the last pass. ``actor`` is
+    read by the anchor's KL (``loss.anchor_coef > 0``: the buffer holds the anchor's
+    log-probabilities) and by the objective of ``loss.all_actions``."""
     steps = max(1, len(buffer) // config.optim.minibatch_size)
     totals: dict[str, float] = {}
     for _ in range(config.optim.epochs):
@@ -697,15 +690,15 @@ def _update(
         for _ in range(steps):
             batch = buffer.sample()
             losses = loss_module(batch)
-            if config.loss.all_actions and actor is not None:
+            if config.loss.all_actions:
                 clip = config.loss.clip_epsilon
                 losses["loss_objective"] = all_action_objective(actor, batch, clip)
             if actor_frozen:
                 total = losses["loss_critic"]
             else:
                 total = losses["loss_objective"] + losses["loss_critic"] + losses["loss_entropy"]
-                if anchored is not None:
-                    losses["kl_anchor"] = anchor_kl(anchored, batch)
+                if config.loss.anchor_coef > 0:
+                    losses["kl_anchor"] = anchor_kl(actor, batch)
                     total = total + config.loss.anchor_coef * losses["kl_anchor"]
             optimizer.zero_grad()
             total.backward()
