@@ -18,8 +18,15 @@ from helpers import run_script  # noqa: E402
 
 from agents import configuration  # noqa: E402
 from agents.batched_env import BatchedCoverageEnv  # noqa: E402
+from agents.evaluation import evaluate  # noqa: E402
 from agents.models.gnn import AggregationGNN, GNNConfig  # noqa: E402
-from agents.models.policy import EgoGraphLogits, StateLogits, load_model, save_model  # noqa: E402
+from agents.models.policy import (  # noqa: E402
+    EgoGraphLogits,
+    GNNPolicy,
+    StateLogits,
+    load_model,
+    save_model,
+)
 from agents.models.value import EgoValue, StateValue  # noqa: E402
 from agents.training.mappo import (  # noqa: E402
     ALL_ADVANTAGES_KEY,
@@ -38,6 +45,7 @@ from agents.training.mappo import (  # noqa: E402
     prepare_batch,
     train_mappo,
 )
+from marl_cover.env import CoverageEnv  # noqa: E402
 from marl_cover.maps import paper_map_path  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -529,3 +537,33 @@ def test_a_run_from_before_a_new_key_resumes(tmp_path: Path) -> None:
     assert summary["iteration"] == 2
     with pytest.raises(ValueError, match="loss.gamma"):
         train_mappo(tiny_config(tmp_path, "collector.n_iters=3", "loss.gamma=0.5"))
+
+
+def test_grow_actor_fine_tunes_a_grown_copy_of_the_init_model(tmp_path: Path) -> None:
+    torch.manual_seed(7)
+    start = AggregationGNN(GNNConfig(kind="nonlinear", hops=3, hidden=8))
+    init = tmp_path / "init.pt"
+    save_model(init, start, {})
+    grown = ("model.actor.kind=nonlinear", "model.actor.hidden=12", "model.actor.per_hop=true")
+    common = (f"init={init}", "collector.n_iters=1", "eval.every=1", "model.actor.kind=nonlinear")
+    config = tiny_config(tmp_path, *common, *grown, "model.grow_actor=true")
+    train_mappo(config)
+    out = Path(config.out)
+    trained, _ = load_model(out / "model.pt")
+    assert trained.config == GNNConfig(kind="nonlinear", hops=3, hidden=12, per_hop=True)
+    # iteration 0 evaluates the grown copy, which plays exactly as the init model
+    curve = json.loads((out / "curve.json").read_text())
+    seeds = range(config.eval.seed, config.eval.seed + config.eval.episodes)
+    played = evaluate(CoverageEnv(**config.env), GNNPolicy(start, centralized=True), seeds)
+    assert curve[0]["eval_reward"] == played.mean
+    with pytest.raises(ValueError, match="grow_actor needs init"):
+        tiny_config(tmp_path, *grown, "model.grow_actor=true")
+    smaller = tiny_config(
+        tmp_path,
+        *common,
+        f"out={tmp_path / 'small'}",
+        "model.actor.hidden=4",
+        "model.grow_actor=true",
+    )
+    with pytest.raises(ValueError, match="model.grow_actor: cannot grow .*init.pt"):
+        train_mappo(smaller)

@@ -34,7 +34,8 @@ terminal in GAE (nothing is collected after it, so its value is not bootstrapped
 the critic cannot tell the start of an episode from its end on the same graph.
 
 Fine-tuning: ``init`` loads a behaviour-cloned model as the actor (its GNN config replaces
-``model.actor``); ``optim.critic_warmup_iters`` trains only the critic for the first iterations,
+``model.actor``, or with ``model.grow_actor`` it is first grown to ``model.actor``: a block per
+hop, more width or hops, the same policy at the start); ``optim.critic_warmup_iters`` trains only the critic for the first iterations,
 so that an untrained critic does not push the cloned policy around; ``model.temperature < 1``
 samples from a sharper policy with the same argmax; ``loss.anchor_coef > 0`` adds to the actor's
 loss that weight times the KL divergence from the starting policy (``init``, frozen, sampled at
@@ -152,7 +153,8 @@ class ModelConfig:
     """Actor and critic networks (``temperature``: the sampling policy's logits are divided by
     it during training; below 1 the policy PPO improves is closer to the argmax policy that is
     evaluated and deployed, whose actions it does not change; ``critic_time``: see the module
-    docstring)."""
+    docstring; ``grow_actor``: with ``init``, the init model grown to ``actor``, a block per hop
+    or more width or hops, with the same logits at the start: :meth:`AggregationGNN.grown_to`)."""
 
     actor: GNNConfig = field(default_factory=lambda: GNNConfig(kind="linear", hops=19))
     critic: GNNConfig = field(default_factory=lambda: GNNConfig(kind="linear", hops=19))
@@ -160,6 +162,7 @@ class ModelConfig:
     value_aggregate: str = "robot"
     temperature: float = 1.0
     critic_time: bool = False
+    grow_actor: bool = False
 
 
 @dataclass
@@ -234,6 +237,8 @@ class MAPPOConfig:
             raise ValueError(f"loss.anchor_coef must be >= 0, got {self.loss.anchor_coef}")
         if self.loss.anchor_coef > 0 and self.init is None:
             raise ValueError("loss.anchor_coef > 0 needs init= (the policy to stay near)")
+        if self.model.grow_actor and self.init is None:
+            raise ValueError("model.grow_actor needs init= (the model to grow to model.actor)")
         self._check_ranges()
 
     def _check_ranges(self) -> None:
@@ -511,6 +516,8 @@ def train_mappo(config: MAPPOConfig) -> dict[str, Any]:
     if config.init is not None:
         actor_gnn, init_meta = load_model(config.init)
         metadata["init"] = {"path": config.init, **init_meta}
+        if config.model.grow_actor:
+            actor_gnn = _grown(actor_gnn, config)
     critic_gnn = AggregationGNN(critic_config(config))
     actor_gnn.to(device).train()
     critic_gnn.to(device).train()
@@ -650,6 +657,17 @@ def train_mappo(config: MAPPOConfig) -> dict[str, Any]:
     summary = {"iteration": iteration, "best_eval_reward": best_reward, **metadata, **metrics}
     write_text_atomic(out / "summary.json", json.dumps(summary, indent=2, default=str))
     return summary
+
+
+def _grown(model: AggregationGNN, config: MAPPOConfig) -> AggregationGNN:
+    """The init model grown to ``model.actor`` (same logits), or a named error."""
+    try:
+        return model.grown_to(config.model.actor, seed=config.seed)
+    except ValueError as error:
+        raise ValueError(
+            f"model.grow_actor: cannot grow {config.init} ({model.config}) to model.actor "
+            f"({config.model.actor}): {error}"
+        ) from error
 
 
 def _resume(
