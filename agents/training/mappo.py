@@ -34,14 +34,14 @@ terminal in GAE (nothing is collected after it, so its value is not bootstrapped
 the critic cannot tell the start of an episode from its end on the same graph.
 
 Fine-tuning: ``init`` loads a behaviour-cloned model as the actor (its GNN config replaces
-``model.actor``, or with ``model.grow_actor`` it is first grown to ``model.actor``: a block per hop,
-more width or hops, the same policy at the start); ``optim.critic_warmup_iters`` trains only the
-critic for the first iterations, so that an untrained critic does not push the cloned policy around;
-``model.temperature < 1`` samples from a sharper policy with the same argmax; ``loss.anchor_coef >
-0`` adds to the actor's loss that weight times the KL divergence from the starting policy (``init``,
-frozen, sampled at the same temperature) to the trained one, averaged over the robots of a minibatch
-(:func:`anchor_kl`; AlphaStar's KL to its supervised policy), so that PPO moves the cloned policy
-only where its advantages point.
+``model.actor``, or with ``model.grow_actor`` it is first grown to ``model.actor``: a block per
+hop, more width or hops, the same policy at the start); ``optim.critic_warmup_iters`` trains only
+the critic for the first iterations, so that an untrained critic does not push the cloned policy
+around; ``model.temperature < 1`` samples from a sharper policy with the same argmax;
+``loss.anchor_coef > 0`` adds to the actor's loss that weight times the KL divergence from the
+starting policy (``init``, frozen, sampled at the same temperature) to the trained one, averaged
+over the robots of a minibatch (:func:`anchor_kl`; AlphaStar's KL to its supervised policy), so
+that PPO moves the cloned policy only where its advantages point.
 
 Outputs in ``out``: ``config.yaml``, ``checkpoint.pt`` (resumable: re-run with the same ``out``),
 ``best.pt`` and ``model.pt`` (actor model files that ``scripts/evaluate.py checkpoint=...``
