@@ -29,6 +29,8 @@ from agents.rollout import GNNArgmax, RolloutPolicy
 from marl_cover.config import TASKS
 from marl_cover.env import CoverageEnv
 
+STAY = 0  # the stay action of ``Discrete(5)`` (``marl_cover.env``)
+
 
 @dataclass
 class RolloutLabelConfig:
@@ -125,19 +127,21 @@ def record_rollout_episode(
     Returns:
         The episode (the waypoints played, the rollout labels and their ``accept`` sets) and
         its counts: ``total`` (the reward played), ``decisions``, ``changed`` (labels that
-        differ from the learner's move).
+        differ from the learner's move) and ``changed_to_stay`` (those of them that stay, action
+        0, where the learner moves).
     """
     rng = np.random.default_rng(seed)
     env.reset(seed=seed)
     start = env.snapshot()
     positions, labels, accepts = [start.robot_node.copy()], [], []
-    total, changed = 0.0, 0
+    total, changed, changed_to_stay = 0.0, 0, 0
     while env.agents:
         own = learner([env.state()])[0]  # (R,)
         label = own if rollout is None else rollout.improve(env)  # (R,)
         labels.append(label)
         accepts.append(1 << own if rollout is None else rollout.accept.copy())
         changed += int((label != own).sum())
+        changed_to_stay += int(((label != own) & (label == STAY)).sum())
         played = np.where(rng.random(len(own)) < beta, label, own) if beta > 0 else own
         total += float(env.apply_actions(played).new_interest.sum())
         positions.append(env.snapshot().robot_node.copy())
@@ -149,7 +153,13 @@ def record_rollout_episode(
         actions=np.array(labels, dtype=np.int8),
         accept=np.array(accepts, dtype=np.int8),
     )
-    counts = {"seed": seed, "total": total, "decisions": len(labels) * len(own), "changed": changed}
+    counts = {
+        "seed": seed,
+        "total": total,
+        "decisions": len(labels) * len(own),
+        "changed": changed,
+        "changed_to_stay": changed_to_stay,
+    }
     return episode, counts
 
 
@@ -194,6 +204,7 @@ def collect_rollout_labels(config: RolloutLabelConfig) -> dict[str, Any]:
             print(
                 f"episode {seed}: {counts['total']:.0f} points, {counts['changed']} of "
                 f"{counts['decisions']} labels differ from the learner's moves "
+                f"({counts['changed_to_stay']} to a stay) "
                 f"({time.perf_counter() - started:.0f} s)",
                 flush=True,
             )
@@ -201,11 +212,15 @@ def collect_rollout_labels(config: RolloutLabelConfig) -> dict[str, Any]:
 
     rows = record_shards(out, config.seed, config.episodes, config.shard_size, record_one)
     decisions = sum(r["decisions"] for r in rows)
+    changed = sum(r["changed"] for r in rows)
+    # shards of older runs lack the stays: counted as unknown (None), not as zero
+    stays = [r.get("changed_to_stay") for r in rows]
     summary = {
         "episodes": len(rows),
         "decisions": decisions,
-        "changed": sum(r["changed"] for r in rows),
-        "changed_share": sum(r["changed"] for r in rows) / max(decisions, 1),
+        "changed": changed,
+        "changed_share": changed / max(decisions, 1),
+        "changed_to_stay": None if None in stays else sum(stays),
         "learner_mean_total": float(np.mean([r["total"] for r in rows])),
     }
     write_text_atomic(out / "summary.json", json.dumps(summary, indent=2))

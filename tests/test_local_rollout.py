@@ -288,7 +288,7 @@ def test_local_labels_are_the_policys_moves_on_the_learners_states() -> None:
     np.testing.assert_array_equal(episode.robot_node, own_episode.robot_node)  # learner's states
     env.reset(seed=3)
     check = LocalRolloutPolicy(model, margin=100.0)
-    changed = 0
+    changed = stays = 0
     for step in range(episode.num_steps):
         label = np.array(list(check.act(env.observations()).values()))
         np.testing.assert_array_equal(episode.actions[step], label)
@@ -296,5 +296,7 @@ def test_local_labels_are_the_policys_moves_on_the_learners_states() -> None:
         assert ((accept >> label) & 1).all()
         own = own_episode.actions[step]
         changed += int((label != own).sum())
+        stays += int(((label != own) & (label == 0)).sum())
         env.apply_actions(own)
     assert counts["changed"] == changed > 0
+    assert counts["changed_to_stay"] == stays

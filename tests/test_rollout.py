@@ -171,7 +171,7 @@ def test_collected_shards_label_the_learners_own_states(tmp_path, random_model_f
     env = marl_cover.parallel_env(
         task="exploration", map="city", city_size=60, num_robots=3, max_steps=6, hops=3
     )
-    changed = 0
+    changed = stays = 0
     for episode in episodes:
         env.reset(seed=episode.seed)
         for step in range(episode.num_steps):
@@ -181,8 +181,10 @@ def test_collected_shards_label_the_learners_own_states(tmp_path, random_model_f
             assert ((accept >> label) & 1).all()  # the label is among the accepted moves
             assert (((accept >> own) & 1) == (label == own)).all()  # own move: kept iff best
             changed += int((label != own).sum())
+            stays += int(((label != own) & (label == 0)).sum())
             env.apply_actions(own)
     assert changed == summary["changed"] > 0
+    assert stays == summary["changed_to_stay"]
     # the same command finishes nothing twice; another seed in that folder is refused
     stamp = (out / "shard_00000.npz").stat().st_mtime_ns
     assert run_script("collect_rollout_labels.py", *args).returncode == 0
@@ -265,6 +267,33 @@ def test_own_labels_are_the_learners_moves() -> None:
     with pytest.raises(ValueError, match="plays coverage only, not task='exploration'"):
         RolloutLabelConfig(task="exploration", greedy_after=1)
     assert RolloutLabelConfig(labels="local", greedy_after=0).greedy_after == 0
+
+
+def test_labels_that_stay_where_the_learner_moves_are_counted() -> None:
+    from agents.models import AggregationGNN, GNNConfig
+    from agents.rollout_labels import record_rollout_episode
+
+    class FirstRobotStays:
+        """A labeller: robot 0 stays, the others keep the learner's moves."""
+
+        def __init__(self, learner: GNNArgmax) -> None:
+            self.learner, self.accept = learner, np.zeros(0, dtype=np.int64)
+
+        def improve(self, env) -> np.ndarray:  # noqa: ANN001
+            label = self.learner([env.state()])[0].copy()
+            label[0] = 0
+            self.accept = (1 << label).astype(np.int64)
+            return label
+
+    torch.manual_seed(4)
+    base = GNNArgmax(AggregationGNN(GNNConfig(kind="nonlinear", hops=3)).double())
+    env = marl_cover.parallel_env(num_robots=3, hops=3, max_steps=6)
+    own, _ = record_rollout_episode(env, base, None, seed=2)
+    episode, counts = record_rollout_episode(env, base, FirstRobotStays(base), seed=2)
+    np.testing.assert_array_equal(episode.robot_node, own.robot_node)  # the learner's states
+    moved = int((own.actions[:, 0] != 0).sum())  # the steps where robot 0 moves
+    assert 0 < moved == counts["changed"] == counts["changed_to_stay"]
+    assert (episode.actions[:, 0] == 0).all()
 
 
 def test_play_outs_cut_short_and_finished_by_another_policy(path_graph) -> None:
