@@ -214,13 +214,13 @@ def collect_rollout_labels(config: RolloutLabelConfig) -> dict[str, Any]:
     decisions = sum(r["decisions"] for r in rows)
     changed = sum(r["changed"] for r in rows)
     # shards of older runs lack the stays: counted as unknown (None), not as zero
-    stays = [r.get("changed_to_stay") for r in rows]
+    stays: list[int | None] = [r.get("changed_to_stay") for r in rows]
     summary = {
         "episodes": len(rows),
         "decisions": decisions,
         "changed": changed,
         "changed_share": changed / max(decisions, 1),
-        "changed_to_stay": None if None in stays else sum(stays),
+        "changed_to_stay": None if None in stays else sum(n for n in stays if n is not None),
         "learner_mean_total": float(np.mean([r["total"] for r in rows])),
     }
     write_text_atomic(out / "summary.json", json.dumps(summary, indent=2))
