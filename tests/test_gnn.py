@@ -17,6 +17,7 @@ from agents.models import (  # noqa: E402
     centralized_logits,
     decentralized_logits,
 )
+from agents.models.policy import load_model, save_model  # noqa: E402
 
 
 def tensors(arrays: dict[str, np.ndarray]) -> dict[str, torch.Tensor]:
@@ -457,3 +458,40 @@ def test_layer_norms_per_block_grow_per_hop_and_refuse_to_widen() -> None:
         shared.wider_copy(16)
     with pytest.raises(ValueError, match="norm applies to the non-linear model only"):
         GNNConfig(kind="linear", norm=True)
+
+
+def test_a_stay_offset_moves_the_stay_logits_only_and_survives_growth(tmp_path) -> None:
+    torch.manual_seed(8)
+    plain = AggregationGNN(GNNConfig(hops=3, hidden=8)).double()
+    offset = plain.grown_to(GNNConfig(hops=3, hidden=8, stay_bias=2.5))
+    assert offset.config.stay_bias == 2.5 and plain.stay_logit is None
+    env = next(random_states(hops=3, seed=4))
+    state = {k: v.double() if v.is_floating_point() else v for k, v in tensors(env.state()).items()}
+    batch = {
+        k: v.double() if v.is_floating_point() else v
+        for k, v in tensors(env.observe_batch()).items()
+    }
+    before, after = centralized_logits(plain, state), centralized_logits(offset, state)
+    torch.testing.assert_close(after[:, 0], before[:, 0] + 2.5, atol=1e-12, rtol=0)
+    torch.testing.assert_close(after[:, 1:], before[:, 1:], atol=0, rtol=0)  # -inf stays -inf
+    torch.testing.assert_close(decentralized_logits(offset, batch), after, atol=1e-9, rtol=0)
+    # the offset learns: a loss on the stays reaches it
+    after[:, 0].sum().backward()
+    assert offset.stay_logit is not None and offset.stay_logit.grad == float(len(after))
+    with torch.no_grad():
+        offset.stay_logit.fill_(-1.25)  # a learned value, which every copy keeps
+    for copy in (
+        offset.per_hop_copy(),
+        offset.wider_copy(12),
+        offset.deeper_copy(4),
+        AggregationGNN.merged([offset, offset]),
+    ):
+        assert copy.stay_logit is not None and copy.stay_logit.item() == -1.25
+    saved = tmp_path / "offset.pt"
+    save_model(saved, offset, {})
+    loaded, _ = load_model(saved)
+    torch.testing.assert_close(
+        centralized_logits(loaded.double(), state), centralized_logits(offset, state)
+    )
+    with pytest.raises(ValueError, match="stay offset already"):
+        offset.with_stay_bias(1.0)

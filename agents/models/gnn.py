@@ -69,6 +69,11 @@ class GNNConfig:
             ``steps_left / time_horizon`` (the actions left in the episode, which an open-loop
             expert plans for), appended by :func:`with_time_feature` from the ``steps_left`` of
             the observation or state. ``None`` (the paper): no time feature.
+        stay_bias: A learned offset added to every robot's stay logit (action 0), starting at
+            this value (the parameter ``stay_logit``). A cloned expert that never waits leaves
+            the stay logit far below the moves, where sampling never tries it; an offset that
+            changes no argmax brings stays within a sharp sampling policy's reach (see
+            :meth:`AggregationGNN.grown_to`). ``None`` (the paper): no offset.
     """
 
     kind: str = "nonlinear"
@@ -81,6 +86,7 @@ class GNNConfig:
     per_hop: bool = False
     norm: bool = False
     time_horizon: int | None = None
+    stay_bias: float | None = None
 
     @property
     def input_features(self) -> int:
@@ -344,6 +350,9 @@ class AggregationGNN(nn.Module):
         self.readout = nn.Linear((config.hops + 1) * h, 1)
         nn.init.orthogonal_(self.readout.weight)
         nn.init.zeros_(self.readout.bias)
+        self.stay_logit: nn.Parameter | None = None
+        if config.stay_bias is not None:
+            self.stay_logit = nn.Parameter(torch.tensor(float(config.stay_bias)))
 
     def per_hop_copy(self) -> AggregationGNN:
         """The same function as a model with a block of its own for each hop.
@@ -445,6 +454,23 @@ class AggregationGNN(nn.Module):
                 layer.weight[rows] = 0.0
                 layer.weight[rows.unsqueeze(1), columns] = old.weight
                 layer.bias[rows] = old.bias
+            if self.stay_logit is not None and copy.stay_logit is not None:
+                copy.stay_logit.copy_(self.stay_logit)
+        return copy.train(self.training)
+
+    def with_stay_bias(self, stay_bias: float) -> AggregationGNN:
+        """This model with a learned stay offset (``GNNConfig.stay_bias``) starting at
+        ``stay_bias``: every stay logit moves by that much, nothing else changes.
+
+        Raises:
+            ValueError: the model has an offset already.
+        """
+        if self.stay_logit is not None:
+            raise ValueError(f"the model has a stay offset already ({self.config.stay_bias})")
+        parameter = self.readout.weight
+        copy = AggregationGNN(replace(self.config, stay_bias=float(stay_bias)))
+        copy = copy.to(device=parameter.device, dtype=parameter.dtype)
+        copy.load_state_dict(self.state_dict(), strict=False)  # all but the new offset
         return copy.train(self.training)
 
     @staticmethod
@@ -490,18 +516,24 @@ class AggregationGNN(nn.Module):
                     columns = _member_indices(old.in_features, layer.in_features, width, m)
                     layer.weight[rows.unsqueeze(1), columns] += old.weight / share
                     layer.bias[rows] += old.bias / share
+            if merged.stay_logit is not None:  # the mean of logits: the mean of the offsets
+                offsets = [cast(torch.Tensor, model.stay_logit) for model in models]
+                merged.stay_logit.copy_(torch.stack(offsets).mean())
         return merged.train(models[0].training)
 
     def grown_to(self, config: GNNConfig, seed: int = 0) -> AggregationGNN:
         """This model grown to ``config`` with the same logits: a block per hop
         (:meth:`per_hop_copy`), more hops (:meth:`deeper_copy`) and more width
-        (:meth:`wider_copy`) as ``config`` asks; itself
-        when ``config`` is its own.
+        (:meth:`wider_copy`) as ``config`` asks; itself when ``config`` is its own. A
+        ``stay_bias`` that this model lacks adds a learned stay offset
+        (:meth:`with_stay_bias`), the one change of logits: the stays move by that much.
 
         Raises:
             ValueError: ``config`` differs in anything else, or asks for less.
         """
         grown = self
+        if config.stay_bias is not None and self.config.stay_bias is None:
+            grown = grown.with_stay_bias(config.stay_bias)
         if config.per_hop and not self.config.per_hop and self.config.kind == "nonlinear":
             grown = grown.per_hop_copy()
         if config.hops > self.config.hops:
@@ -788,7 +820,11 @@ def action_logits(
 ) -> torch.Tensor:
     """Logits ``(R, 5)`` of the action edges ``(R, 5)`` of a flat graph; ``-inf`` where ``-1``."""
     picked = model(*graph, out_edges=action_edges.clamp(min=0).reshape(-1))
-    return picked.view(action_edges.shape).masked_fill(action_edges < 0, float("-inf"))
+    logits = picked.view(action_edges.shape)
+    if model.stay_logit is not None:  # (GNNConfig.stay_bias) the stay slot is column 0
+        stay = logits[..., :1] + model.stay_logit.to(logits.dtype)
+        logits = torch.cat([stay, logits[..., 1:]], dim=-1)
+    return logits.masked_fill(action_edges < 0, float("-inf"))
 
 
 def decentralized_logits(model: AggregationGNN, batch: dict[str, torch.Tensor]) -> torch.Tensor:
