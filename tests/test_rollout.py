@@ -187,8 +187,14 @@ def test_collected_shards_label_the_learners_own_states(tmp_path, random_model_f
     assert stays == summary["changed_to_stay"]
     # the same command finishes nothing twice; another seed in that folder is refused
     stamp = (out / "shard_00000.npz").stat().st_mtime_ns
+    # (a shard of an older run, without the stays: their total is unknown, not zero)
+    rows = json.loads((out / "shard_00000.json").read_text())
+    old = [{k: v for k, v in row.items() if k != "changed_to_stay"} for row in rows]
+    (out / "shard_00000.json").write_text(json.dumps(old))
     assert run_script("collect_rollout_labels.py", *args).returncode == 0
     assert (out / "shard_00000.npz").stat().st_mtime_ns == stamp
+    again = json.loads((out / "summary.json").read_text())
+    assert again["changed"] == summary["changed"] and again["changed_to_stay"] is None
     refused = run_script("collect_rollout_labels.py", *args[:-2], "seed=7", f"out={out}")
     assert refused.returncode != 0 and "seed" in refused.stderr
 
