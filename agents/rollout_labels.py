@@ -27,9 +27,8 @@ import numpy as np
 from agents.datasets import Episode
 from agents.rollout import GNNArgmax, RolloutPolicy
 from marl_cover.config import TASKS
+from marl_cover.ego import STAY
 from marl_cover.env import CoverageEnv
-
-STAY = 0  # the stay action of ``Discrete(5)`` (``marl_cover.env``)
 
 
 @dataclass
@@ -140,8 +139,9 @@ def record_rollout_episode(
         label = own if rollout is None else rollout.improve(env)  # (R,)
         labels.append(label)
         accepts.append(1 << own if rollout is None else rollout.accept.copy())
-        changed += int((label != own).sum())
-        changed_to_stay += int(((label != own) & (label == STAY)).sum())
+        differs = label != own  # (R,)
+        changed += int(differs.sum())
+        changed_to_stay += int((differs & (label == STAY)).sum())
         played = np.where(rng.random(len(own)) < beta, label, own) if beta > 0 else own
         total += float(env.apply_actions(played).new_interest.sum())
         positions.append(env.snapshot().robot_node.copy())
@@ -213,14 +213,14 @@ def collect_rollout_labels(config: RolloutLabelConfig) -> dict[str, Any]:
     rows = record_shards(out, config.seed, config.episodes, config.shard_size, record_one)
     decisions = sum(r["decisions"] for r in rows)
     changed = sum(r["changed"] for r in rows)
-    # shards of older runs lack the stays: counted as unknown (None), not as zero
-    stays: list[int | None] = [r.get("changed_to_stay") for r in rows]
+    # shards of older runs lack the stays: their total is unknown (None), not zero
+    stays = [r["changed_to_stay"] for r in rows if "changed_to_stay" in r]
     summary = {
         "episodes": len(rows),
         "decisions": decisions,
         "changed": changed,
         "changed_share": changed / max(decisions, 1),
-        "changed_to_stay": None if None in stays else sum(n for n in stays if n is not None),
+        "changed_to_stay": sum(stays) if len(stays) == len(rows) else None,
         "learner_mean_total": float(np.mean([r["total"] for r in rows])),
     }
     write_text_atomic(out / "summary.json", json.dumps(summary, indent=2))

@@ -40,6 +40,8 @@ NODE_FEATURES = ("is_robot", "is_waypoint", "is_interest", "is_frontier")
 NUM_NODE_FEATURES = len(NODE_FEATURES)
 #: Action slots: 0 = stay, then east, north, west, south.
 NUM_ACTIONS = 5
+#: The stay action's slot.
+STAY = 0
 #: Edges reserved at the head of an ego-graph for the ego robot's action edges, both ways.
 NUM_EGO_ACTION_EDGES = 2 * NUM_ACTIONS
 ROBOT_FEATURE = np.array([1.0, 0.0, 0.0, 0.0], dtype=np.float32)

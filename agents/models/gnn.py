@@ -37,7 +37,7 @@ from typing import NamedTuple, cast
 import torch
 from torch import nn
 
-from marl_cover.ego import NUM_ACTIONS, NUM_NODE_FEATURES
+from marl_cover.ego import NUM_ACTIONS, NUM_NODE_FEATURES, STAY
 
 try:  # optional (the ``fast`` extra): the receptive field's distances, compiled
     from agents.models._field_numba import capped_distances as _capped_distances
@@ -354,6 +354,11 @@ class AggregationGNN(nn.Module):
         if config.stay_bias is not None:
             self.stay_logit = nn.Parameter(torch.tensor(float(config.stay_bias)))
 
+    def _fresh(self, config: GNNConfig) -> AggregationGNN:
+        """A newly initialised model of ``config`` on this model's device and dtype."""
+        parameter = self.readout.weight
+        return AggregationGNN(config).to(device=parameter.device, dtype=parameter.dtype)
+
     def per_hop_copy(self) -> AggregationGNN:
         """The same function as a model with a block of its own for each hop.
 
@@ -368,9 +373,7 @@ class AggregationGNN(nn.Module):
             raise ValueError(
                 f"per_hop_copy needs a non-linear shared-block model, got {self.config}"
             )
-        parameter = self.readout.weight
-        copy = AggregationGNN(replace(self.config, per_hop=True))
-        copy = copy.to(device=parameter.device, dtype=parameter.dtype)
+        copy = self._fresh(replace(self.config, per_hop=True))
         # encoders, decoder and readout by name (the shared blocks have no namesake there)
         copy.load_state_dict(self.state_dict(), strict=False)
         for block in copy.edge_blocks:
@@ -400,9 +403,7 @@ class AggregationGNN(nn.Module):
         old_hops, hidden = self.config.hops, self.config.hidden
         if hops <= old_hops:
             raise ValueError(f"deeper_copy needs hops > {old_hops}, got {hops}")
-        parameter = self.readout.weight
-        copy = AggregationGNN(replace(self.config, hops=hops))
-        copy = copy.to(device=parameter.device, dtype=parameter.dtype)
+        copy = self._fresh(replace(self.config, hops=hops))
         state = {k: v for k, v in self.state_dict().items() if not k.startswith("readout.")}
         copy.load_state_dict(state, strict=False)
         with torch.no_grad():
@@ -437,11 +438,9 @@ class AggregationGNN(nn.Module):
             raise ValueError(f"wider_copy needs hidden > {old_width}, got {hidden}")
         if self.config.norm:
             raise ValueError("wider_copy cannot keep the function of a model with norm")
-        parameter = self.readout.weight
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(seed)
-            copy = AggregationGNN(replace(self.config, hidden=hidden))
-        copy = copy.to(device=parameter.device, dtype=parameter.dtype)
+            copy = self._fresh(replace(self.config, hidden=hidden))
         old_layers = dict(self.named_modules())
         with torch.no_grad():
             for name, layer in copy.named_modules():
@@ -467,9 +466,7 @@ class AggregationGNN(nn.Module):
         """
         if self.stay_logit is not None:
             raise ValueError(f"the model has a stay offset already ({self.config.stay_bias})")
-        parameter = self.readout.weight
-        copy = AggregationGNN(replace(self.config, stay_bias=float(stay_bias)))
-        copy = copy.to(device=parameter.device, dtype=parameter.dtype)
+        copy = self._fresh(replace(self.config, stay_bias=float(stay_bias)))
         copy.load_state_dict(self.state_dict(), strict=False)  # all but the new offset
         return copy.train(self.training)
 
@@ -497,10 +494,8 @@ class AggregationGNN(nn.Module):
         if config.norm:
             raise ValueError("cannot merge models with norm (a layer norm would mix members)")
         num, width = len(models), config.hidden
-        parameter = models[0].readout.weight
         with torch.random.fork_rng(devices=[]):  # every weight is set below: no global draw
-            merged = AggregationGNN(replace(config, hidden=num * width))
-        merged = merged.to(device=parameter.device, dtype=parameter.dtype)
+            merged = models[0]._fresh(replace(config, hidden=num * width))
         members = [dict(model.named_modules()) for model in models]
         with torch.no_grad():
             for name, layer in merged.named_modules():
@@ -821,9 +816,10 @@ def action_logits(
     """Logits ``(R, 5)`` of the action edges ``(R, 5)`` of a flat graph; ``-inf`` where ``-1``."""
     picked = model(*graph, out_edges=action_edges.clamp(min=0).reshape(-1))
     logits = picked.view(action_edges.shape)
-    if model.stay_logit is not None:  # (GNNConfig.stay_bias) the stay slot is column 0
-        stay = logits[..., :1] + model.stay_logit.to(logits.dtype)
-        logits = torch.cat([stay, logits[..., 1:]], dim=-1)
+    if model.stay_logit is not None:  # (GNNConfig.stay_bias) added to the stay slot only
+        slot = torch.zeros(NUM_ACTIONS, dtype=logits.dtype, device=logits.device)
+        slot[STAY] = 1.0
+        logits = logits + slot * model.stay_logit.to(logits.dtype)
     return logits.masked_fill(action_edges < 0, float("-inf"))
 
 
