@@ -495,3 +495,23 @@ def test_a_stay_offset_moves_the_stay_logits_only_and_survives_growth(tmp_path) 
     )
     with pytest.raises(ValueError, match="stay offset already"):
         offset.with_stay_bias(1.0)
+
+
+def test_the_diffusion_backward_equals_torch_s_own_bit_for_bit() -> None:
+    from agents.models.gnn import _Diffusion, mean_operator
+
+    generator = torch.Generator().manual_seed(0)
+    num_nodes = 50  # directed edges, self-loops and isolated nodes; no repeated edge
+    edge_index = torch.unique(torch.randint(0, num_nodes, (2, 400), generator=generator), dim=1)
+    edge_index = edge_index[:, torch.randperm(edge_index.shape[1], generator=generator)]
+    operator = mean_operator(edge_index, num_nodes, torch.float32)
+    transposed = mean_operator(edge_index, num_nodes, torch.float32, transpose=True)
+    assert torch.equal(transposed.to_dense(), operator.to_dense().t())
+    h = torch.randn(num_nodes, 16, generator=generator, requires_grad=True)
+    weights = torch.randn(num_nodes, 16, generator=generator)
+    twice = _Diffusion.apply(operator, transposed, _Diffusion.apply(operator, transposed, h))
+    ours = torch.autograd.grad((twice * weights).sum(), h)[0]
+    plain = torch.sparse.mm(operator, torch.sparse.mm(operator, h))
+    torchs = torch.autograd.grad((plain * weights).sum(), h)[0]
+    assert torch.equal(twice, plain)
+    assert torch.equal(ours, torchs)
