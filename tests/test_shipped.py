@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import replace
+from pathlib import Path
 
 import pytest
 
@@ -210,3 +211,36 @@ def test_the_mission_flies_the_29_hop_model_fine_tuned_by_mappo_on_the_stand_in(
     )
     assert card["config"]["init"] == "agents/models/shipped/mission/coverage_gnn.pt"
     assert city_rewards(model) == [86.0, 83.0, 87.0, 88.0, 75.0]
+
+
+def test_the_8000_step_fine_tune_is_the_bc_model_trained_by_the_recipe_of_issue_6() -> None:
+    """``mappo_8000/coverage_gnn.pt`` (session 45): the BC model fine-tuned by MAPPO with 8000
+    env steps a gradient step, its iterate 230 (read as fixed beforehand, docs/results/mappo.md)."""
+    model, metadata, card = shipped_beside("mappo_8000")
+    bc, _, _ = shipped_beside("bc")
+    assert model.config == bc.config
+    assert metadata["algorithm"] == "mappo" and metadata["iteration"] == 230
+    assert metadata["init"]["path"] == "agents/models/shipped/bc/coverage_gnn.pt"
+    assert card["init"]["sha256"] == file_sha256(SHIPPED / "bc" / "coverage_gnn.pt")
+    config = card["config"]
+    assert config["init"] == "agents/models/shipped/bc/coverage_gnn.pt"
+    assert (config["collector"]["frames_per_batch"], config["collector"]["n_iters"]) == (8000, 230)
+    assert (config["optim"]["lr"], config["model"]["temperature"]) == (0.0003, 0.25)
+    assert city_rewards(model) == card["scores"]["cities_seeds_0_4_float64"]
+    assert city_rewards(model) == [74.0, 93.0, 78.0, 92.0, 90.0]
+
+
+def test_the_8000_step_preset_is_the_recipe_of_the_shipped_fine_tune(tmp_path: Path) -> None:
+    """``configs/mappo_finetune_8000.yaml`` with the run's folder and quiet progress gives the
+    settings recorded in ``mappo_8000/coverage_gnn.json``."""
+    from agents import configuration
+    from agents.training.mappo import MAPPOConfig
+
+    card = json.loads((SHIPPED / "mappo_8000" / "coverage_gnn.json").read_text())
+    recorded = tmp_path / "recorded.json"
+    recorded.write_text(json.dumps(card["config"]))
+    preset = SHIPPED.parents[2] / "configs" / "mappo_finetune_8000.yaml"
+    overrides = ["out=outputs/runs/seed0", "progress=false"]
+    assert configuration.load(MAPPOConfig, preset, overrides) == configuration.load(
+        MAPPOConfig, recorded
+    )
