@@ -255,6 +255,7 @@ def test_the_exploration_8000_step_preset_is_the_coverage_recipe_from_the_shippe
     preset_path = configs / "mappo_finetune_exploration_8000.yaml"
     preset = configuration.load(MAPPOConfig, preset_path, [f"out={recorded.out}", "progress=false"])
     coverage = configuration.load(MAPPOConfig, configs / "mappo_finetune_8000.yaml", [])
+    assert preset.env == {**coverage.env, "task": "exploration"}
     assert preset == replace(
         recorded,
         init="agents/models/shipped/exploration_gnn.pt",
