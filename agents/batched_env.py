@@ -26,6 +26,9 @@ key                                    shape            meaning
 ``("state", k)``                       ``(N, ...)``     ``state()``: the whole graph, ``k`` as
                                                         above plus ``robot_nodes (N, R)`` and
                                                         ``steps_left (N,)``
+``("privileged", k)``                  ``(N, ...)``     with ``privileged_state``: the true map
+                                                        (:meth:`CoverageEnv.privileged_state`),
+                                                        the keys of ``state``, for a critic
 ``done``, ``terminated``, ``truncated``  ``(N, 1)``     episode end (shared by the team)
 ``("robot", "info", "counterfactual")``  ``(N, R, 5)``  with ``counterfactual_hops``: greedy's
                                                         return after each robot's each move, the
@@ -100,6 +103,9 @@ class BatchedCoverageEnv(EnvBase):
             from, greedy's return (horizon K) after every robot's every move with the others on
             their actions (coverage only; the counterfactual advantages of
             :mod:`agents.training.mappo`).
+        privileged_state: Also report the true map's state (``("privileged", k)``:
+            :meth:`marl_cover.CoverageEnv.privileged_state`), for a critic trained with
+            information the robots lack (exploration; in coverage it equals ``state``).
         **overrides: Fields of :class:`marl_cover.config.CoverageConfig`.
     """
 
@@ -111,6 +117,7 @@ class BatchedCoverageEnv(EnvBase):
         observe_robots: bool = True,
         device: Any = "cpu",
         counterfactual_hops: int | None = None,
+        privileged_state: bool = False,
         **overrides: Any,
     ) -> None:
         if num_envs < 1:
@@ -127,6 +134,7 @@ class BatchedCoverageEnv(EnvBase):
                 f"{self.config.task!r}"
             )
         self.counterfactual_hops = counterfactual_hops
+        self.privileged_state = privileged_state
         #: ``(robot, info)`` entries: dtype and the shape after ``(N, R)``.
         self._info: dict[str, tuple[torch.dtype, tuple[int, ...]]] = {
             key: (dtype, ()) for key, dtype in INFO_KEYS.items()
@@ -175,9 +183,11 @@ class BatchedCoverageEnv(EnvBase):
         state["steps_left"] = Bounded(
             0, core.config.max_steps, shape=(n,), dtype=torch.int64, device=device
         )
+        graphs = {"state": Composite(state, shape=(n,))}
+        if self.privileged_state:
+            graphs["privileged"] = graphs["state"].clone()
         self.observation_spec = Composite(
-            {GROUP: Composite(group, shape=(n, r)), "state": Composite(state, shape=(n,))},
-            shape=(n,),
+            {GROUP: Composite(group, shape=(n, r)), **graphs}, shape=(n,)
         )
         self.action_spec = Composite(
             {
@@ -278,6 +288,9 @@ class BatchedCoverageEnv(EnvBase):
         state = env.state()
         row = {f"state.{k}": state[k] for k in STATE_KEYS}
         row["action_mask"] = state["action_mask"].astype(bool)
+        if self.privileged_state:
+            privileged = env.privileged_state()
+            row.update({f"privileged.{k}": privileged[k] for k in STATE_KEYS})
         if self.observe_robots:
             ego = env.observe_batch()
             row.update({f"obs.{k}": ego[k] for k in OBSERVATION_KEYS})
@@ -324,8 +337,14 @@ class BatchedCoverageEnv(EnvBase):
             {k: torch.from_numpy(out[f"state.{k}"]) for k in STATE_KEYS},
             batch_size=(n,),
         )
+        graphs = {"state": state}
+        if self.privileged_state:
+            graphs["privileged"] = TensorDict(
+                {k: torch.from_numpy(out[f"privileged.{k}"]) for k in STATE_KEYS},
+                batch_size=(n,),
+            )
         result = TensorDict(
-            {GROUP: group, "state": state, **{k: torch.from_numpy(v) for k, v in done.items()}},
+            {GROUP: group, **graphs, **{k: torch.from_numpy(v) for k, v in done.items()}},
             batch_size=(n,),
         )
         return result.to(self.device) if self.device != torch.device("cpu") else result

@@ -574,6 +574,24 @@ class CoverageEnv(ParallelEnv):
         state["steps_left"] = np.array(self._steps_left(), dtype=np.int64)
         return state
 
+    def privileged_state(self) -> dict[str, np.ndarray]:
+        """The true map in :meth:`state`'s encoding, for a critic trained with information the
+        robots do not have (asymmetric actor-critic): every waypoint and edge, in map order,
+        and every unvisited point of interest, discovered or not. In exploration the fourth
+        node column marks the waypoints the team has *not* discovered (where :meth:`state` has
+        the frontier); in coverage it is 0 and the result equals :meth:`state`. Same keys,
+        shapes and dtypes as :meth:`state`; no robot observes it.
+        """
+        self._episode_map()
+        assert self._state_builder is not None  # built with the map
+        robot_node, features = self._view()
+        if self._discovery is not None:
+            features = features.copy()
+            features[:, 3] = ~self._discovery.discovered
+        state = self._state_builder.build(robot_node, features)
+        state["steps_left"] = np.array(self._steps_left(), dtype=np.int64)
+        return state
+
     def _view(self) -> tuple[np.ndarray, np.ndarray]:
         """What the observations and ``state()`` are built on: each robot's waypoint ``(R,)``
         and the waypoint features ``(N, 4)``."""

@@ -34,6 +34,11 @@ def assert_same_transition(td, envs, returns) -> None:  # noqa: ANN001
         state = env.state()
         for key in STATE_KEYS:
             np.testing.assert_array_equal(td["state", key][i].numpy(), state[key])
+        if "privileged" in td.keys():  # noqa: SIM118 (a TensorDict has no `in`)
+            privileged = env.privileged_state()
+            for key in STATE_KEYS:
+                got = td["privileged", key][i].numpy()
+                np.testing.assert_array_equal(got, privileged[key], err_msg=f"env {i} {key}")
         for key in ("new_interest", "total_interest", "blocked", "invalid_action"):
             assert td["robot", "info", key][i].tolist() == [infos[a][key] for a in agents]
         if len(ret) == 5:
@@ -59,14 +64,23 @@ def step_both(batched, td, envs, action):  # noqa: ANN001, ANN201
 
 
 @pytest.mark.parametrize(
-    ("allow_swaps", "task"), [(True, "coverage"), (False, "coverage"), (True, "exploration")]
+    ("allow_swaps", "task", "privileged"),
+    [
+        (True, "coverage", False),
+        (False, "coverage", False),
+        (True, "exploration", False),
+        (True, "exploration", True),
+    ],
 )
-def test_same_transitions_as_pettingzoo(allow_swaps: bool, task: str) -> None:
+def test_same_transitions_as_pettingzoo(allow_swaps: bool, task: str, privileged: bool) -> None:
     num_envs, seed = 3, 11
-    batched = BatchedCoverageEnv(num_envs, allow_swaps=allow_swaps, task=task, **CONFIG)
+    batched = BatchedCoverageEnv(
+        num_envs, allow_swaps=allow_swaps, task=task, privileged_state=privileged, **CONFIG
+    )
     batched.set_seed(seed)
     envs = [parallel_env(allow_swaps=allow_swaps, task=task, **CONFIG) for _ in range(num_envs)]
     td = batched.reset()
+    assert ("privileged" in td.keys()) == privileged  # noqa: SIM118
     assert_same_transition(td, envs, {i: env.reset(seed=seed + i) for i, env in enumerate(envs)})
     rng = np.random.default_rng(0)
     episodes_ended = 0
@@ -100,6 +114,7 @@ def test_check_env_specs_and_collector(task: str) -> None:
     lean = BatchedCoverageEnv(2, observe_robots=False, task=task, **CONFIG)
     check_env_specs(lean)
     assert "observation" not in lean.reset()["robot"]
+    check_env_specs(BatchedCoverageEnv(2, task=task, privileged_state=True, **CONFIG))
 
 
 def test_counterfactual_returns_of_each_step() -> None:

@@ -96,6 +96,35 @@ def test_range_is_euclidean_and_the_known_graph_keeps_only_known_edges(u_graph) 
     assert int(env.state()["edge_mask"][10:].sum()) == 12
 
 
+def test_privileged_state_is_the_true_map_with_the_undiscovered_marked(u_graph) -> None:  # noqa: ANN001
+    env, _ = explore(u_graph, [0], [4, 6], sensor_range=12.0, hops=8)
+    privileged = env.privileged_state()
+    assert privileged.keys() == env.state().keys()
+    for key, value in privileged.items():
+        assert value.shape == env.state()[key].shape and value.dtype == env.state()[key].dtype
+    # every waypoint in map order; 4 (undiscovered) is a point of interest and marked unknown
+    assert int(privileged["node_mask"].sum()) == 1 + 7
+    assert privileged["nodes"][1:8, 1].tolist() == [1] * 7
+    assert privileged["nodes"][1:8, 2].tolist() == [0, 0, 0, 0, 1, 0, 1]
+    assert privileged["nodes"][1:8, 3].tolist() == [0, 0, 0, 0, 1, 0, 0]
+    assert int(privileged["edge_mask"][10:].sum()) == 12  # all six lattice edges, both ways
+    # the robot on 0, then the waypoints 0..6
+    assert privileged["node_pos"][:8].tolist() == [
+        [0, 0], [0, 0], [1, 0], [2, 0], [2, 1], [2, 2], [1, 2], [0, 2]
+    ]  # fmt: skip
+    assert int(privileged["steps_left"]) == env.config.max_steps
+    env.step({"robot_0": 1})
+    env.step({"robot_0": 1})  # at 2: 4 is discovered, nothing is unknown
+    privileged = env.privileged_state()
+    assert privileged["nodes"][1:8, 3].tolist() == [0] * 7
+    assert int(privileged["steps_left"]) == env.config.max_steps - 2
+    # in coverage it is the state
+    coverage = marl_cover.parallel_env(graph=u_graph, num_robots=1, hops=8)
+    coverage.reset(options={"robot_nodes": [0], "interest_nodes": [3, 4]})
+    for key, value in coverage.privileged_state().items():
+        np.testing.assert_array_equal(value, coverage.state()[key], err_msg=key)
+
+
 def test_coverage_is_exploration_with_everything_known(u_graph) -> None:  # noqa: ANN001
     coverage = marl_cover.parallel_env(graph=u_graph, num_robots=1, hops=8)
     observations, _ = coverage.reset(options={"robot_nodes": [0], "interest_nodes": [3, 4]})

@@ -322,6 +322,25 @@ def test_time_aware_critic_trains(tmp_path: Path, algorithm: str) -> None:
     assert checkpoint["critic_config"]["node_features"] == 5  # 4 node features + steps left
 
 
+def test_privileged_critic_reads_the_true_map(tmp_path: Path) -> None:
+    config = tiny_config(
+        tmp_path, "env.task=exploration", "model.critic_input=privileged", "collector.n_iters=2"
+    )
+    critic = build_critic(AggregationGNN(config.model.critic), config, 3)
+    assert critic.in_keys == [("privileged", k) for k in GRAPH_IN]
+    timed = tiny_config(tmp_path, "model.critic_input=privileged", "model.critic_time=true")
+    assert build_critic(AggregationGNN(timed.model.critic), timed, 3, horizon=10).in_keys[-1] == (
+        "privileged",
+        "steps_left",
+    )
+    summary = train_mappo(config)
+    assert summary["iteration"] == 2 and np.isfinite(summary["loss_critic"])
+    with pytest.raises(ValueError, match="critic_input=privileged needs algorithm=mappo"):
+        tiny_config(tmp_path, "algorithm=ippo", "model.critic_input=privileged")
+    with pytest.raises(ValueError, match="model.critic_input must be one of"):
+        tiny_config(tmp_path, "model.critic_input=truth")
+
+
 def test_snapshots_keep_the_actor_of_every_evaluation(tmp_path: Path) -> None:
     config = tiny_config(tmp_path, "collector.n_iters=4", "eval.every=2", "snapshots=true")
     train_mappo(config)

@@ -32,6 +32,11 @@ about a quarter of the work; ``"ego"`` runs it on the ego-graphs the robots obse
 ``steps_left``, as one more node feature), and the end of an episode at ``max_steps`` counts as
 terminal in GAE (nothing is collected after it, so its value is not bootstrapped). Without it
 the critic cannot tell the start of an episode from its end on the same graph.
+``model.critic_input="privileged"`` (MAPPO): the critic reads the true map instead of
+``state`` (:meth:`marl_cover.CoverageEnv.privileged_state`: in exploration every waypoint,
+discovered or not, and every unvisited point of interest), an asymmetric actor-critic: the
+actor still sees only what the robots see, and the critic, used only in training, values a
+state by what lies beyond the discovered map too.
 
 Fine-tuning: ``init`` loads a behaviour-cloned model as the actor (its GNN config replaces
 ``model.actor``, or with ``model.grow_actor`` it is first grown to ``model.actor``: a block per
@@ -101,6 +106,7 @@ class CollectorConfig:
 
 REWARDS = ("team", "own")
 ADVANTAGES = ("gae", "counterfactual")
+CRITIC_INPUTS = ("state", "privileged")
 
 
 @dataclass
@@ -153,7 +159,8 @@ class ModelConfig:
     """Actor and critic networks (``temperature``: the sampling policy's logits are divided by
     it during training; below 1 the policy PPO improves is closer to the argmax policy that is
     evaluated and deployed, whose actions it does not change; ``critic_time``: see the module
-    docstring; ``grow_actor``: with ``init``, the init model grown to ``actor``, a block per hop
+    docstring; ``critic_input``: ``"state"`` or ``"privileged"``, see the module docstring;
+    ``grow_actor``: with ``init``, the init model grown to ``actor``, a block per hop
     or more width or hops, with the same logits at the start: :meth:`AggregationGNN.grown_to`)."""
 
     actor: GNNConfig = field(default_factory=lambda: GNNConfig(kind="linear", hops=19))
@@ -162,6 +169,7 @@ class ModelConfig:
     value_aggregate: str = "robot"
     temperature: float = 1.0
     critic_time: bool = False
+    critic_input: str = "state"
     grow_actor: bool = False
 
 
@@ -202,6 +210,16 @@ class MAPPOConfig:
         if self.model.actor_input not in ("state", "ego"):
             raise ValueError(
                 f"model.actor_input must be state or ego, got {self.model.actor_input!r}"
+            )
+        if self.model.critic_input not in CRITIC_INPUTS:
+            raise ValueError(
+                f"model.critic_input must be one of {CRITIC_INPUTS}, got "
+                f"{self.model.critic_input!r}"
+            )
+        if self.model.critic_input == "privileged" and self.algorithm != "mappo":
+            raise ValueError(
+                "model.critic_input=privileged needs algorithm=mappo (the ippo critic reads "
+                "each robot's ego-graph)"
             )
         if self.loss.reward not in REWARDS:
             raise ValueError(f"loss.reward must be one of {REWARDS}, got {self.loss.reward!r}")
@@ -305,6 +323,7 @@ def make_env(config: MAPPOConfig) -> Any:
         config.collector.num_envs,
         observe_robots=config.needs_ego,
         counterfactual_hops=counterfactual_hops,
+        privileged_state=config.model.critic_input == "privileged",
         **config.env,
     )
 
@@ -341,7 +360,8 @@ def build_critic(
     if config.model.critic_time and horizon is None:
         raise ValueError("model.critic_time needs the episode length (horizon)")
     horizon = horizon if config.model.critic_time else None
-    time_keys = [("state", "steps_left")] if config.model.critic_time else []
+    root = "privileged" if config.model.critic_input == "privileged" else "state"
+    time_keys = [(root, "steps_left")] if config.model.critic_time else []
     if config.algorithm == "ippo":
         return TensorDictModule(
             EgoValue(gnn, horizon),
@@ -350,7 +370,7 @@ def build_critic(
         )
     return TensorDictModule(
         StateValue(gnn, num_robots, config.model.value_aggregate, horizon),
-        in_keys=[("state", k) for k in GRAPH_IN] + time_keys,
+        in_keys=[(root, k) for k in GRAPH_IN] + time_keys,
         out_keys=[(GROUP, "state_value")],
     )
 
