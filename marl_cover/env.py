@@ -569,10 +569,7 @@ class CoverageEnv(ParallelEnv):
     def state(self) -> dict[str, np.ndarray]:
         """The whole graph in the observation encoding (see the module docstring)."""
         self._episode_map()
-        assert self._state_builder is not None  # built with the map
-        state = self._state_builder.build(*self._view(), self._discovery)
-        state["steps_left"] = np.array(self._steps_left(), dtype=np.int64)
-        return state
+        return self._build_state(*self._view(), self._discovery)
 
     def privileged_state(self) -> dict[str, np.ndarray]:
         """The true map in :meth:`state`'s encoding, for a critic trained with information the
@@ -583,12 +580,19 @@ class CoverageEnv(ParallelEnv):
         shapes and dtypes as :meth:`state`; no robot observes it.
         """
         self._episode_map()
-        assert self._state_builder is not None  # built with the map
         robot_node, features = self._view()
         if self._discovery is not None:
             features = features.copy()
             features[:, 3] = ~self._discovery.discovered
-        state = self._state_builder.build(robot_node, features)
+        return self._build_state(robot_node, features, None)
+
+    def _build_state(
+        self, robot_node: np.ndarray, features: np.ndarray, discovery: Discovery | None
+    ) -> dict[str, np.ndarray]:
+        """The state of robots on ``robot_node`` ``(R,)`` with waypoint ``features`` ``(N, 4)``
+        (only what ``discovery`` holds, or every waypoint), with the clock."""
+        assert self._state_builder is not None  # built with the map
+        state = self._state_builder.build(robot_node, features, discovery)
         state["steps_left"] = np.array(self._steps_left(), dtype=np.int64)
         return state
 

@@ -360,7 +360,7 @@ def build_critic(
     if config.model.critic_time and horizon is None:
         raise ValueError("model.critic_time needs the episode length (horizon)")
     horizon = horizon if config.model.critic_time else None
-    root = "privileged" if config.model.critic_input == "privileged" else "state"
+    root = config.model.critic_input  # the batched env's key: "state" or "privileged"
     time_keys = [(root, "steps_left")] if config.model.critic_time else []
     if config.algorithm == "ippo":
         return TensorDictModule(
