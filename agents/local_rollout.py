@@ -26,6 +26,11 @@ policy is as decentralized as the GNN. The robot's world model is wrong where it
 (teammates beyond it, the map beyond it, in exploration the undiscovered map), and in its
 world it has the collision resolver's first priority. Measured in
 ``docs/results/exploration.md`` (session 37).
+
+:class:`TrueMapRolloutPolicy` is not a controller but a bound: it builds each robot's world from
+the true map within its ``hops`` (:func:`true_map_world`: in exploration the undiscovered
+waypoints and points of interest too), so it measures what a perfect model of the unknown map
+could add to the decentralized rollout (session 50).
 """
 
 from __future__ import annotations
@@ -42,7 +47,7 @@ from agents.rollout import BasePolicy, GNNArgmax, play_out_greedy_finish
 from agents.spread import teammate_waypoints
 from marl_cover.config import CoverageConfig
 from marl_cover.ego import NODE_FEATURES, NUM_EGO_ACTION_EDGES
-from marl_cover.env import CoverageEnv
+from marl_cover.env import CoverageEnv, CoverageSnapshot
 from marl_cover.graph import SpatialGraph
 
 _IS_WAYPOINT, _IS_INTEREST, _IS_FRONTIER = (
@@ -115,6 +120,52 @@ def ego_world(
         seed=0,
         options={"robot_nodes": robot_nodes, "interest_nodes": np.flatnonzero(interest)},
     )
+    return world
+
+
+def true_map_world(
+    snapshot: CoverageSnapshot,
+    robot: int,
+    hops: int,
+    horizon: int | None = None,
+    known_interest: bool = False,
+) -> CoverageEnv:
+    """A coverage environment, reset, on the true map within ``hops`` of one robot (an oracle).
+
+    The world :func:`ego_world` builds in coverage, built from the episode itself: the waypoints
+    within ``hops`` lattice hops of the robot's waypoint (in map order) and their edges, the
+    unvisited points of interest among them, the robot (robot 0 of the world) and its teammates
+    on them (in robot order), and the steps left. In exploration it holds the undiscovered
+    waypoints and points of interest too, which no robot has seen: a bound, not a controller.
+
+    Args:
+        snapshot: The episode's state (:meth:`marl_cover.CoverageEnv.snapshot`).
+        robot: Index of the planning robot.
+        hops: Radius of the world and of its robots' ego-graphs.
+        horizon: Most steps the world runs (``None``: as many as the episode has left).
+        known_interest: Keep only the points of interest the team has discovered: the true
+            waypoints and edges, the points the robots know (what a perfect model of the
+            unknown map's layout, and nothing of its points, would give).
+    """
+    graph = snapshot.graph
+    robot_node = snapshot.robot_node  # (R,)
+    ball = np.flatnonzero(np.isfinite(graph.hop_distances(robot_node[[robot]], limit=hops)[0]))
+    local = np.full(graph.num_nodes, -1, dtype=np.int64)
+    local[ball] = np.arange(len(ball))
+    mates = np.delete(robot_node, robot)
+    nodes = np.concatenate([local[robot_node[[robot]]], local[mates[local[mates] >= 0]]])
+    interest = snapshot.unvisited_interest[ball]
+    if known_interest:
+        interest &= snapshot.discovered[ball]
+    interest[nodes] = False
+    steps = snapshot.max_steps - snapshot.num_steps
+    if horizon is not None:
+        steps = min(steps, horizon)
+    config = CoverageConfig(
+        graph=graph.subgraph(ball), num_robots=len(nodes), hops=hops, max_steps=max(steps, 1)
+    )
+    world = CoverageEnv(config)
+    world.reset(seed=0, options={"robot_nodes": nodes, "interest_nodes": np.flatnonzero(interest)})
     return world
 
 
@@ -209,13 +260,7 @@ class LocalRolloutPolicy(GNNPolicy):
         candidates = np.flatnonzero(np.isfinite(logits) & (logits >= logits[best] - self.margin))
         if len(candidates) < 2:
             return best, 1 << best
-        try:
-            world = ego_world(
-                observation, self.model.config.hops, self.horizon, self.frontier_as_interest
-            )
-        except KeyError as error:
-            raise KeyError(f"the observation of {agent} has no {error.args[0]!r}") from None
-        returns = self._play_outs(world, candidates)  # (C,)
+        returns = self._play_outs(self._world(observation, agent), candidates)  # (C,)
         self.counts["played"] += 1
         self.counts["play_outs"] += len(candidates)
         top = candidates[returns == returns.max()]
@@ -224,6 +269,15 @@ class LocalRolloutPolicy(GNNPolicy):
             return best, accept
         self.counts["changed"] += 1
         return int(top[np.argmax(logits[top])]), accept
+
+    def _world(self, observation: Mapping[str, np.ndarray], agent: str) -> CoverageEnv:
+        """The world ``agent`` plays its candidates out in: its ego-graph's."""
+        try:
+            return ego_world(
+                observation, self.model.config.hops, self.horizon, self.frontier_as_interest
+            )
+        except KeyError as error:
+            raise KeyError(f"the observation of {agent} has no {error.args[0]!r}") from None
 
     def _play_outs(self, world: CoverageEnv, candidates: np.ndarray) -> np.ndarray:
         """The return ``(C,)`` of each candidate first move of robot 0 in ``world``."""
@@ -236,3 +290,48 @@ class LocalRolloutPolicy(GNNPolicy):
         joints = np.repeat(joint[None, :], len(candidates), axis=0)  # (C, 1 + T)
         joints[:, 0] = candidates
         return play_out_greedy_finish(world, self.base, joints, self.greedy_after, hops)
+
+
+class TrueMapRolloutPolicy(LocalRolloutPolicy):
+    """:class:`LocalRolloutPolicy` with each robot's world built from the true map within its
+    ``hops`` (:func:`true_map_world`) instead of its ego-graph: an oracle that bounds what a
+    perfect model of the undiscovered map could add to the decentralized rollout. The GNN's
+    scores, the candidates and the play-outs are the local rollout's; in coverage the two
+    worlds are the same and so are the episodes (tested). It reads the environment (the
+    evaluation harness's :meth:`act_env`), so it is not a controller a robot could run.
+
+    Args:
+        model: An :class:`~agents.models.gnn.AggregationGNN`.
+        known_interest: The world holds only the points of interest the team has discovered
+            (:func:`true_map_world`): the layout's share of the bound.
+        **kwargs: :class:`LocalRolloutPolicy`'s settings.
+
+    Raises:
+        ValueError: ``frontier_as_interest`` (the true map has no frontier), or the local
+            rollout's errors.
+    """
+
+    def __init__(self, model: Any, known_interest: bool = False, **kwargs: Any) -> None:
+        if kwargs.get("frontier_as_interest"):
+            raise ValueError("frontier_as_interest does not apply to the true map's world")
+        super().__init__(model, **kwargs)
+        self.known_interest = known_interest
+        self._snapshot: CoverageSnapshot | None = None
+        self._robot_index: dict[str, int] = {}
+
+    def act_env(self, env: CoverageEnv) -> dict[str, int]:
+        """Every robot's action, its near-ties played out on the true map around it."""
+        self._snapshot = env.snapshot()
+        self._robot_index = {agent: i for i, agent in enumerate(env.possible_agents)}
+        try:
+            return self.act(env.observations())
+        finally:
+            self._snapshot = None  # act() alone has no environment to read
+
+    def _world(self, observation: Mapping[str, np.ndarray], agent: str) -> CoverageEnv:
+        """The true map within the receptive field of ``agent``."""
+        if self._snapshot is None:
+            raise RuntimeError("TrueMapRolloutPolicy plays through act_env(env), not act()")
+        robot = self._robot_index[agent]
+        hops = self.model.config.hops
+        return true_map_world(self._snapshot, robot, hops, self.horizon, self.known_interest)

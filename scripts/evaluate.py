@@ -43,7 +43,10 @@ view and itself then on the GNN's argmax, for ``gnn.horizon`` steps (default: to
 in exploration it plays on the discovered waypoints in view, and
 ``gnn.frontier_as_interest=true`` also scores the frontier there; about 3 s an episode on the
 paper's windows; ``gnn.greedy_after=N``: greedy plays the play-outs' moves after the GNN's
-first N (faster).
+first N (faster); ``gnn.world=true_map``: an oracle bound, not a controller, that plays them
+out on the true map within each robot's ``hops`` (in exploration the undiscovered part too;
+``agents.local_rollout.TrueMapRolloutPolicy``); ``gnn.world=true_layout``: the same true
+waypoints and edges with only the points of interest the team has discovered.
 Maps: ``city`` (default), ``paper`` (windows of the paper's map), ``paper_full``,
 ``paper_large``, or a grid file. Any other ``key=value`` is a field of ``CoverageConfig``
 (``num_robots=10``, ``max_steps=49``, ...); an unknown key is an error.
@@ -76,6 +79,8 @@ POLICIES = (
     "gnn_rollout",
     "gnn_local_rollout",
 )
+#: Worlds of ``gnn_local_rollout``'s play-outs: the robot's view, or oracles on the true map.
+WORLDS = ("view", "true_map", "true_layout")
 
 
 @dataclass
@@ -101,6 +106,7 @@ class GNNOptions:
     horizon: int | None = None  # gnn_local_rollout: steps of a play-out (None: to the end)
     frontier_as_interest: bool = False  # gnn_local_rollout, exploration: the frontier scores
     greedy_after: int | None = None  # gnn_(local_)rollout: greedy after this many GNN moves
+    world: str = "view"  # gnn_local_rollout: "view" (the ego-graph), "true_map", "true_layout"
 
 
 @dataclass
@@ -196,14 +202,18 @@ def parse_overrides(
             "(it plays out the GNN's argmax)"
         )
     default = GNNOptions()
-    planning = ("margin", "horizon", "frontier_as_interest")
+    planning = ("margin", "horizon", "frontier_as_interest", "world")
     if options.policy != "gnn_local_rollout" and any(
         getattr(gnn, name) != getattr(default, name) for name in planning
     ):
         raise SystemExit(
-            "gnn.margin, gnn.horizon and gnn.frontier_as_interest apply to "
+            "gnn.margin, gnn.horizon, gnn.frontier_as_interest and gnn.world apply to "
             "policy=gnn_local_rollout only"
         )
+    if gnn.world not in WORLDS:
+        raise SystemExit(f"gnn.world must be one of {list(WORLDS)}, got {gnn.world!r}")
+    if gnn.world != "view" and gnn.frontier_as_interest:
+        raise SystemExit(f"gnn.frontier_as_interest does not apply to gnn.world={gnn.world}")
     if gnn.greedy_after is not None and not rollout:
         raise SystemExit("gnn.greedy_after applies to policy=gnn_rollout or gnn_local_rollout")
     if options.policy == "gnn_rollout" and gnn.greedy_after is not None and gnn.greedy_after < 1:
@@ -278,8 +288,16 @@ def make_policy(
             GNNArgmax(model), sequential=gnn.sequential, greedy_after=gnn.greedy_after
         )
     if options.policy == "gnn_local_rollout":
-        from agents.local_rollout import LocalRolloutPolicy
+        from agents.local_rollout import LocalRolloutPolicy, TrueMapRolloutPolicy
 
+        if gnn.world != "view":
+            return TrueMapRolloutPolicy(
+                model,
+                known_interest=gnn.world == "true_layout",
+                margin=gnn.margin,
+                horizon=gnn.horizon,
+                greedy_after=gnn.greedy_after,
+            )
         return LocalRolloutPolicy(
             model,
             margin=gnn.margin,

@@ -124,6 +124,12 @@ def test_cli_rejects_unknown_keys() -> None:
         ("policy=gnn gnn.greedy_after=1", "gnn.greedy_after applies to policy=gnn_rollout or"),
         ("policy=gnn_rollout gnn.greedy_after=0", "needs gnn.greedy_after >= 1 (or null), got 0"),
         ("policy=gnn_local_rollout gnn.centralized=true", "do not apply to policy=gnn_local"),
+        ("policy=gnn gnn.world=true_map", "gnn.world apply to policy=gnn_local_rollout only"),
+        ("policy=gnn_local_rollout gnn.world=oracle", "gnn.world must be one of ['view', "),
+        (
+            "policy=gnn_local_rollout gnn.world=true_layout gnn.frontier_as_interest=true",
+            "gnn.frontier_as_interest does not apply to gnn.world=true_layout",
+        ),
     ],
 )
 def test_cli_names_bad_values(argument: str, message: str) -> None:

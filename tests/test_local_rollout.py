@@ -11,7 +11,12 @@ import pytest
 torch = pytest.importorskip("torch")
 
 import marl_cover  # noqa: E402
-from agents.local_rollout import LocalRolloutPolicy, ego_world  # noqa: E402
+from agents.local_rollout import (  # noqa: E402
+    LocalRolloutPolicy,
+    TrueMapRolloutPolicy,
+    ego_world,
+    true_map_world,
+)
 from agents.models import AggregationGNN, GNNConfig  # noqa: E402
 from agents.models.policy import GNNPolicy  # noqa: E402
 from marl_cover.graph import SpatialGraph  # noqa: E402
@@ -200,6 +205,87 @@ def test_greedy_finishes_the_play_outs(interest: list[int], chosen: int, greedy_
         FixedLogits([[0.0] * 5], greedy_after=-1)
 
 
+class FixedTrueMap(TrueMapRolloutPolicy):
+    """:class:`FixedLogits` for the oracle."""
+
+    def __init__(self, logits: list[list[float]], **kwargs) -> None:  # noqa: ANN003
+        super().__init__(AggregationGNN(GNNConfig(kind="linear", hops=6)), **kwargs)
+        self.fixed = torch.tensor(logits, dtype=torch.float64)
+
+    def logits(self, observations):  # noqa: ANN001, ANN201
+        return self.fixed
+
+
+def test_the_true_map_world_holds_what_the_team_has_not_seen() -> None:
+    """The 7-waypoint corridor in exploration, sensor 5 m, robot_0 on 3: the team knows 2, 3
+    and 4, the points on 0 and 1 are undiscovered. The robot's view holds no point, so both
+    moves return 0 there and the argmax (east) stays; on the true map west returns 2 (0, 1
+    under "west") and the oracle takes it."""
+    graph = lattice(7, 1)
+    env = marl_cover.parallel_env(
+        graph=graph, num_robots=1, hops=6, max_steps=4, task="exploration", sensor_range=5.0
+    )
+    observations, _ = env.reset(seed=0, options={"robot_nodes": [3], "interest_nodes": [0, 1]})
+    seen = ego_world(observations["robot_0"], hops=6).snapshot()
+    assert seen.graph.num_nodes == 3 and not seen.unvisited_interest.any()
+    world = true_map_world(env.snapshot(), robot=0, hops=6).snapshot()
+    assert world.graph.num_nodes == 7 and world.robot_node.tolist() == [3]
+    assert np.flatnonzero(world.unvisited_interest).tolist() == [0, 1]
+    assert world.max_steps == 4 and world.discovered.all()  # a coverage world
+    assert true_map_world(env.snapshot(), robot=0, hops=2, horizon=3).snapshot().max_steps == 3
+    layout = true_map_world(env.snapshot(), robot=0, hops=6, known_interest=True).snapshot()
+    assert layout.graph.num_nodes == 7 and not layout.unvisited_interest.any()
+    near = true_map_world(env.snapshot(), robot=0, hops=2).snapshot()  # waypoints 1..5
+    assert near.graph.num_nodes == 5 and near.robot_node.tolist() == [2]
+    assert np.flatnonzero(near.unvisited_interest).tolist() == [0]  # the point on 1
+
+    east_best = [[0.0, 1.0, -np.inf, 0.8, -np.inf]]
+    local = FixedLogits(east_best, margin=0.5, base=always(WEST))
+    assert local.act(observations) == {"robot_0": EAST}
+    assert local.counts == {"decisions": 1, "played": 1, "play_outs": 2}
+    oracle = FixedTrueMap(east_best, margin=0.5, base=always(WEST))
+    assert oracle.act_env(env) == {"robot_0": WEST}
+    assert oracle.counts == {"decisions": 1, "played": 1, "play_outs": 2, "changed": 1}
+    blind = FixedTrueMap(east_best, known_interest=True, margin=0.5, base=always(WEST))
+    assert blind.act_env(env) == {"robot_0": EAST}  # the layout alone holds no point
+    with pytest.raises(RuntimeError, match="plays through act_env"):
+        oracle.act(observations)
+    with pytest.raises(ValueError, match="frontier_as_interest does not apply"):
+        FixedTrueMap(east_best, frontier_as_interest=True)
+
+
+def test_in_coverage_the_true_map_oracle_plays_the_local_rollout() -> None:
+    """In coverage a robot's view is the true map within its hops: the two worlds are the
+    same environment, and the oracle's episode is the local rollout's, move for move."""
+    graph = lattice(6, 5, holes=((2, 2), (3, 1)))
+    torch.manual_seed(3)
+    model = AggregationGNN(GNNConfig(kind="nonlinear", hops=3))
+    env = marl_cover.parallel_env(graph=graph, num_robots=3, hops=3, max_steps=8)
+    twin = marl_cover.parallel_env(graph=graph, num_robots=3, hops=3, max_steps=8)
+    observations, _ = env.reset(seed=4)
+    twin.reset(seed=4)
+    local = LocalRolloutPolicy(model, margin=100.0)
+    oracle = TrueMapRolloutPolicy(model, margin=100.0)
+    for agent in env.possible_agents:
+        robot = env.possible_agents.index(agent)
+        mine = ego_world(observations[agent], hops=3).state()
+        truth = true_map_world(env.snapshot(), robot, hops=3).state()
+        assert mine.keys() == truth.keys()
+        for key in mine.keys() - {"node_pos"}:
+            np.testing.assert_array_equal(mine[key], truth[key], err_msg=f"{agent} {key}")
+        # positions: the ego-graph's are relative to the robot, the map's are not
+        on = mine["node_mask"]
+        np.testing.assert_array_equal(
+            mine["node_pos"][on] - mine["node_pos"][0], truth["node_pos"][on] - truth["node_pos"][0]
+        )
+    while env.agents:
+        actions = local.act(observations)
+        assert oracle.act_env(twin) == actions
+        observations, *_ = env.step(actions)
+        twin.step(actions)
+    assert local.counts == oracle.counts and local.counts["played"] > 0
+
+
 def test_margin_zero_is_the_gnn_and_bad_settings_are_named() -> None:
     graph = lattice(4, 3)
     torch.manual_seed(0)
@@ -257,6 +343,28 @@ def test_cli_plays_the_decentralized_rollout(tmp_path) -> None:
                 "gnn.frontier_as_interest=true",
             ],
         ),
+        (
+            "oracle",
+            ["policy=gnn_local_rollout", "gnn.margin=100", "gnn.horizon=4", "gnn.world=true_map"],
+        ),
+        (
+            "explore_oracle",
+            [
+                "policy=gnn_local_rollout",
+                "task=exploration",
+                "gnn.margin=100",
+                "gnn.world=true_map",
+            ],
+        ),
+        (
+            "explore_layout",
+            [
+                "policy=gnn_local_rollout",
+                "task=exploration",
+                "gnn.margin=100",
+                "gnn.world=true_layout",
+            ],
+        ),
     ):
         out = tmp_path / f"{name}.json"
         result = run_script("evaluate.py", *common, *extra, f"out={out}")
@@ -266,7 +374,9 @@ def test_cli_plays_the_decentralized_rollout(tmp_path) -> None:
     assert rewards["zero"] == rewards["gnn"]
     assert records["zero"]["policy_counts"]["decisions"] == 2 * 8 * 3
     assert "played" not in records["zero"]["policy_counts"]
-    for name in ("wide", "finish", "explore", "frontier"):
+    assert rewards["oracle"] == rewards["wide"]  # coverage: the view is the true map
+    assert records["oracle"]["policy_counts"] == records["wide"]["policy_counts"]
+    for name in ("wide", "finish", "explore", "frontier", "explore_oracle", "explore_layout"):
         counts = records[name]["policy_counts"]
         assert counts["decisions"] == 2 * 8 * 3 and 0 < counts["played"] <= counts["decisions"]
         assert 2 * counts["played"] <= counts["play_outs"] <= 5 * counts["played"]
