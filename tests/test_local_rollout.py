@@ -205,15 +205,8 @@ def test_greedy_finishes_the_play_outs(interest: list[int], chosen: int, greedy_
         FixedLogits([[0.0] * 5], greedy_after=-1)
 
 
-class FixedTrueMap(TrueMapRolloutPolicy):
-    """:class:`FixedLogits` for the oracle."""
-
-    def __init__(self, logits: list[list[float]], **kwargs) -> None:  # noqa: ANN003
-        super().__init__(AggregationGNN(GNNConfig(kind="linear", hops=6)), **kwargs)
-        self.fixed = torch.tensor(logits, dtype=torch.float64)
-
-    def logits(self, observations):  # noqa: ANN001, ANN201
-        return self.fixed
+class FixedTrueMap(FixedLogits, TrueMapRolloutPolicy):
+    """:class:`FixedLogits` on the true map's worlds (its K = 4 covers the corridor below)."""
 
 
 def test_the_true_map_world_holds_what_the_team_has_not_seen() -> None:
