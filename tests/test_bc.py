@@ -234,6 +234,7 @@ def test_configs_reject_values_of_the_wrong_type(tmp_path) -> None:
         ("lr_decay=1.5", r"lr_decay must be in \(0, 1\], got 1.5"),
         ("select_episodes=0", "select_episodes must be >= 1, got 0"),
         ("threads=0", "threads must be >= 1, got 0"),
+        ("temperature=0", "temperature must be > 0, got 0"),
         ("dagger.beta=2", r"dagger.beta must be in \[0, 1\], got 2"),
         ("dagger.rounds=-1", "dagger.rounds and dagger.steps must be >= 0"),
         ("dagger.episodes=0", "dagger.episodes must be >= 1, got 0"),

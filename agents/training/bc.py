@@ -197,6 +197,9 @@ class BCConfig:
     # train on the set of actions as good as each label (batch_loss): the dataset's from its
     # trajectories (trajectory_ties), the DAgger states' as their expert recorded them
     ties: bool = False
+    # the loss reads the logits divided by this (argmaxes unchanged): above 1, a sharp starting
+    # model's confident moves keep a gradient beside the few labels that differ from them
+    temperature: float = 1.0
     dagger: DaggerConfig = field(default_factory=DaggerConfig)
 
     def __post_init__(self) -> None:
@@ -222,6 +225,7 @@ class BCConfig:
             ),
             (self.seed >= 0 and self.select_seed >= 0, "seed and select_seed must be >= 0"),
             (self.threads >= 1, f"threads must be >= 1, got {self.threads}"),
+            (self.temperature > 0, f"temperature must be > 0, got {self.temperature}"),
         )
 
     @property
@@ -286,6 +290,7 @@ def batch_loss(
     max_steps: int | None = None,
     extra: Part | None = None,
     ties: bool = False,
+    temperature: float = 1.0,
 ) -> tuple[torch.Tensor, dict[str, float]]:
     """Mean cross-entropy of the expert's actions over every robot of a batch of transitions
     (``max_steps``: actions per episode, for a model that reads the time), and of the ``extra``
@@ -294,7 +299,8 @@ def batch_loss(
     With ``ties`` the loss is instead the negative log-probability of the set of actions the
     expert rated as good as its label (the transitions' ``accept`` bit masks): a learner is not
     pushed toward the expert's tie-break between equally short paths. The metrics hold both,
-    and the accuracy of the argmax against the label and against the set."""
+    and the accuracy of the argmax against the label and against the set. ``temperature``
+    divides the logits the losses read (the accuracies are the argmax's either way)."""
     parts = [Part(batch, table, max_steps)] + ([] if extra is None else [extra])
     logit_parts, targets, accepts = [], [], []
     for part in parts:
@@ -305,6 +311,7 @@ def batch_loss(
         targets.append(part.batch["action"].reshape(-1))
         accepts.append(part.batch["accept"].reshape(-1))
     logits, target, accept = torch.cat(logit_parts), torch.cat(targets), torch.cat(accepts)
+    logits = logits / temperature
     # robots without a label (-1: they did not decide at that state) do not count
     labelled = target >= 0  # (B*R,)
     if not bool(labelled.any()):
@@ -613,6 +620,7 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
             env.config.max_steps,
             extra=extra,
             ties=config.ties,
+            temperature=config.temperature,
         )
         optimizer.zero_grad()
         loss.backward()
