@@ -108,8 +108,22 @@ def ego_world(
     interest = nodes[ids, _IS_INTEREST] > 0
     if frontier_as_interest:
         interest |= nodes[ids, _IS_FRONTIER] > 0
-    interest[robot_nodes] = False
     steps = int(observation["steps_left"])
+    return _world(graph, robot_nodes, interest, hops, steps, horizon)
+
+
+def _world(
+    graph: SpatialGraph,
+    robot_nodes: np.ndarray,
+    interest: np.ndarray,
+    hops: int,
+    steps: int,
+    horizon: int | None,
+) -> CoverageEnv:
+    """A coverage environment on ``graph``, reset with robots on ``robot_nodes`` ``(R,)`` (robot
+    0 the planning one) and the points of interest ``interest`` ``(N,)`` bool not under a robot,
+    for ``steps`` (at most ``horizon``; at least 1)."""
+    interest = interest & ~np.isin(np.arange(len(interest)), robot_nodes)
     if horizon is not None:
         steps = min(steps, horizon)
     config = CoverageConfig(
@@ -157,16 +171,8 @@ def true_map_world(
     interest = snapshot.unvisited_interest[ball]
     if known_interest:
         interest &= snapshot.discovered[ball]
-    interest[nodes] = False
     steps = snapshot.max_steps - snapshot.num_steps
-    if horizon is not None:
-        steps = min(steps, horizon)
-    config = CoverageConfig(
-        graph=graph.subgraph(ball), num_robots=len(nodes), hops=hops, max_steps=max(steps, 1)
-    )
-    world = CoverageEnv(config)
-    world.reset(seed=0, options={"robot_nodes": nodes, "interest_nodes": np.flatnonzero(interest)})
-    return world
+    return _world(graph.subgraph(ball), nodes, interest, hops, steps, horizon)
 
 
 def _cell_size(node_pos: np.ndarray, src: np.ndarray, dst: np.ndarray, metres: np.ndarray) -> float:
