@@ -30,7 +30,10 @@ world it has the collision resolver's first priority. Measured in
 :class:`TrueMapRolloutPolicy` is not a controller but a bound: it builds each robot's world from
 the true map within its ``hops`` (:func:`true_map_world`: in exploration the undiscovered
 waypoints and points of interest too), so it measures what a perfect model of the unknown map
-could add to the decentralized rollout (session 50).
+could add to the decentralized rollout (session 50); with ``hidden="none"`` or ``"all"`` the
+undiscovered waypoints carry no point or all count as points, which splits that bound into the
+layout's share and the points' (session 51: the layout with every unseen waypoint a point is
+worth as much as the true map).
 """
 
 from __future__ import annotations
@@ -49,6 +52,9 @@ from marl_cover.config import CoverageConfig
 from marl_cover.ego import NODE_FEATURES, NUM_EGO_ACTION_EDGES
 from marl_cover.env import CoverageEnv, CoverageSnapshot
 from marl_cover.graph import SpatialGraph
+
+#: What :func:`true_map_world` puts on the waypoints the team has not discovered.
+HIDDEN_INTEREST = ("true", "none", "all")
 
 _IS_WAYPOINT, _IS_INTEREST, _IS_FRONTIER = (
     NODE_FEATURES.index(name) for name in ("is_waypoint", "is_interest", "is_frontier")
@@ -142,7 +148,7 @@ def true_map_world(
     robot: int,
     hops: int,
     horizon: int | None = None,
-    known_interest: bool = False,
+    hidden: str = "true",
 ) -> CoverageEnv:
     """A coverage environment, reset, on the true map within ``hops`` of one robot (an oracle).
 
@@ -157,10 +163,17 @@ def true_map_world(
         robot: Index of the planning robot.
         hops: Radius of the world and of its robots' ego-graphs.
         horizon: Most steps the world runs (``None``: as many as the episode has left).
-        known_interest: Keep only the points of interest the team has discovered: the true
-            waypoints and edges, the points the robots know (what a perfect model of the
-            unknown map's layout, and nothing of its points, would give).
+        hidden: The points of interest on the waypoints the team has not discovered:
+            ``"true"`` (where they are: the oracle), ``"none"`` (the true waypoints and edges
+            with only the points the robots know: what a perfect model of the unknown map's
+            layout, and nothing of its points, would give) or ``"all"`` (every undiscovered
+            waypoint a point: that layout with an optimistic prior on its points).
+
+    Raises:
+        ValueError: ``hidden`` is none of those.
     """
+    if hidden not in HIDDEN_INTEREST:
+        raise ValueError(f"hidden must be one of {list(HIDDEN_INTEREST)}, got {hidden!r}")
     graph = snapshot.graph
     robot_node = snapshot.robot_node  # (R,)
     ball = np.flatnonzero(np.isfinite(graph.hop_distances(robot_node[[robot]], limit=hops)[0]))
@@ -168,9 +181,11 @@ def true_map_world(
     local[ball] = np.arange(len(ball))
     mates = np.delete(robot_node, robot)
     nodes = np.concatenate([local[robot_node[[robot]]], local[mates[local[mates] >= 0]]])
-    interest = snapshot.unvisited_interest[ball]
-    if known_interest:
+    interest = snapshot.unvisited_interest[ball]  # (B,)
+    if hidden == "none":
         interest &= snapshot.discovered[ball]
+    elif hidden == "all":
+        interest |= ~snapshot.discovered[ball]
     steps = snapshot.max_steps - snapshot.num_steps
     return _world(graph.subgraph(ball), nodes, interest, hops, steps, horizon)
 
@@ -308,20 +323,23 @@ class TrueMapRolloutPolicy(LocalRolloutPolicy):
 
     Args:
         model: An :class:`~agents.models.gnn.AggregationGNN`.
-        known_interest: The world holds only the points of interest the team has discovered
-            (:func:`true_map_world`): the layout's share of the bound.
+        hidden: The points of interest on the undiscovered waypoints (:func:`true_map_world`):
+            ``"true"``, ``"none"`` (the layout's share of the bound) or ``"all"`` (the layout
+            with an optimistic prior).
         **kwargs: :class:`LocalRolloutPolicy`'s settings.
 
     Raises:
-        ValueError: ``frontier_as_interest`` (the true map has no frontier), or the local
-            rollout's errors.
+        ValueError: ``frontier_as_interest`` (the true map has no frontier), ``hidden`` is not
+            one of :data:`HIDDEN_INTEREST`, or the local rollout's errors.
     """
 
-    def __init__(self, model: Any, known_interest: bool = False, **kwargs: Any) -> None:
+    def __init__(self, model: Any, hidden: str = "true", **kwargs: Any) -> None:
         if kwargs.get("frontier_as_interest"):
             raise ValueError("frontier_as_interest does not apply to the true map's world")
+        if hidden not in HIDDEN_INTEREST:
+            raise ValueError(f"hidden must be one of {list(HIDDEN_INTEREST)}, got {hidden!r}")
         super().__init__(model, **kwargs)
-        self.known_interest = known_interest
+        self.hidden = hidden
         self._snapshot: CoverageSnapshot | None = None
         self._robot_index: dict[str, int] = {}
 
@@ -340,4 +358,4 @@ class TrueMapRolloutPolicy(LocalRolloutPolicy):
             raise RuntimeError("TrueMapRolloutPolicy plays through act_env(env), not act()")
         robot = self._robot_index[agent]
         hops = self.model.config.hops
-        return true_map_world(self._snapshot, robot, hops, self.horizon, self.known_interest)
+        return true_map_world(self._snapshot, robot, hops, self.horizon, self.hidden)

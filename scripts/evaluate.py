@@ -46,7 +46,9 @@ paper's windows; ``gnn.greedy_after=N``: greedy plays the play-outs' moves after
 first N (faster); ``gnn.world=true_map``: an oracle bound, not a controller, that plays them
 out on the true map within each robot's ``hops`` (in exploration the undiscovered part too;
 ``agents.local_rollout.TrueMapRolloutPolicy``); ``gnn.world=true_layout``: the same true
-waypoints and edges with only the points of interest the team has discovered.
+waypoints and edges with only the points of interest the team has discovered;
+``gnn.world=optimistic_layout``: those waypoints and edges with every undiscovered waypoint
+counted as a point of interest (an optimistic prior on a perfectly known layout).
 Maps: ``city`` (default), ``paper`` (windows of the paper's map), ``paper_full``,
 ``paper_large``, or a grid file. Any other ``key=value`` is a field of ``CoverageConfig``
 (``num_robots=10``, ``max_steps=49``, ...); an unknown key is an error.
@@ -80,7 +82,9 @@ POLICIES = (
     "gnn_local_rollout",
 )
 #: Worlds of ``gnn_local_rollout``'s play-outs: the robot's view, or oracles on the true map.
-WORLDS = ("view", "true_map", "true_layout")
+WORLDS = ("view", "true_map", "true_layout", "optimistic_layout")
+#: What each true-map world puts on the undiscovered waypoints (``TrueMapRolloutPolicy``'s hidden).
+_HIDDEN = {"true_map": "true", "true_layout": "none", "optimistic_layout": "all"}
 
 
 @dataclass
@@ -106,7 +110,7 @@ class GNNOptions:
     horizon: int | None = None  # gnn_local_rollout: steps of a play-out (None: to the end)
     frontier_as_interest: bool = False  # gnn_local_rollout, exploration: the frontier scores
     greedy_after: int | None = None  # gnn_(local_)rollout: greedy after this many GNN moves
-    world: str = "view"  # gnn_local_rollout: "view" (the ego-graph), "true_map", "true_layout"
+    world: str = "view"  # gnn_local_rollout: "view" (the ego-graph) or an oracle of WORLDS
 
 
 @dataclass
@@ -293,7 +297,7 @@ def make_policy(
         if gnn.world != "view":
             return TrueMapRolloutPolicy(
                 model,
-                known_interest=gnn.world == "true_layout",
+                hidden=_HIDDEN[gnn.world],
                 margin=gnn.margin,
                 horizon=gnn.horizon,
                 greedy_after=gnn.greedy_after,

@@ -213,7 +213,9 @@ def test_the_true_map_world_holds_what_the_team_has_not_seen() -> None:
     """The 7-waypoint corridor in exploration, sensor 5 m, robot_0 on 3: the team knows 2, 3
     and 4, the points on 0 and 1 are undiscovered. The robot's view holds no point, so both
     moves return 0 there and the argmax (east) stays; on the true map west returns 2 (0, 1
-    under "west") and the oracle takes it."""
+    under "west") and the oracle takes it. With only the known points on the true layout
+    (``hidden="none"``) nothing is in reach; with every undiscovered waypoint a point
+    (``hidden="all"``) 0, 1, 5 and 6 are."""
     graph = lattice(7, 1)
     env = marl_cover.parallel_env(
         graph=graph, num_robots=1, hops=6, max_steps=4, task="exploration", sensor_range=5.0
@@ -226,8 +228,12 @@ def test_the_true_map_world_holds_what_the_team_has_not_seen() -> None:
     assert np.flatnonzero(world.unvisited_interest).tolist() == [0, 1]
     assert world.max_steps == 4 and world.discovered.all()  # a coverage world
     assert true_map_world(env.snapshot(), robot=0, hops=2, horizon=3).snapshot().max_steps == 3
-    layout = true_map_world(env.snapshot(), robot=0, hops=6, known_interest=True).snapshot()
+    layout = true_map_world(env.snapshot(), robot=0, hops=6, hidden="none").snapshot()
     assert layout.graph.num_nodes == 7 and not layout.unvisited_interest.any()
+    hopeful = true_map_world(env.snapshot(), robot=0, hops=6, hidden="all").snapshot()
+    assert np.flatnonzero(hopeful.unvisited_interest).tolist() == [0, 1, 5, 6]
+    with pytest.raises(ValueError, match=r"hidden must be one of \['true', 'none', 'all'\]"):
+        true_map_world(env.snapshot(), robot=0, hops=6, hidden="some")
     near = true_map_world(env.snapshot(), robot=0, hops=2).snapshot()  # waypoints 1..5
     assert near.graph.num_nodes == 5 and near.robot_node.tolist() == [2]
     assert np.flatnonzero(near.unvisited_interest).tolist() == [0]  # the point on 1
@@ -239,8 +245,14 @@ def test_the_true_map_world_holds_what_the_team_has_not_seen() -> None:
     oracle = FixedTrueMap(east_best, margin=0.5, base=always(WEST))
     assert oracle.act_env(env) == {"robot_0": WEST}
     assert oracle.counts == {"decisions": 1, "played": 1, "play_outs": 2, "changed": 1}
-    blind = FixedTrueMap(east_best, known_interest=True, margin=0.5, base=always(WEST))
+    blind = FixedTrueMap(east_best, hidden="none", margin=0.5, base=always(WEST))
     assert blind.act_env(env) == {"robot_0": EAST}  # the layout alone holds no point
+    hopeful = FixedTrueMap(east_best, hidden="all", margin=0.5, base=always(WEST))
+    # Every undiscovered waypoint hoped for: west then west reaches 1 and 0 (2), east then
+    # west only 1 (1), as on the true map.
+    assert hopeful.act_env(env) == {"robot_0": WEST}
+    with pytest.raises(ValueError, match=r"hidden must be one of .*got 'some'"):
+        FixedTrueMap(east_best, hidden="some")
     with pytest.raises(RuntimeError, match="plays through act_env"):
         oracle.act(observations)
     with pytest.raises(ValueError, match="frontier_as_interest does not apply"):
@@ -358,6 +370,15 @@ def test_cli_plays_the_decentralized_rollout(tmp_path) -> None:
                 "gnn.world=true_layout",
             ],
         ),
+        (
+            "explore_optimistic",
+            [
+                "policy=gnn_local_rollout",
+                "task=exploration",
+                "gnn.margin=100",
+                "gnn.world=optimistic_layout",
+            ],
+        ),
     ):
         out = tmp_path / f"{name}.json"
         result = run_script("evaluate.py", *common, *extra, f"out={out}")
@@ -369,7 +390,8 @@ def test_cli_plays_the_decentralized_rollout(tmp_path) -> None:
     assert "played" not in records["zero"]["policy_counts"]
     assert rewards["oracle"] == rewards["wide"]  # coverage: the view is the true map
     assert records["oracle"]["policy_counts"] == records["wide"]["policy_counts"]
-    for name in ("wide", "finish", "explore", "frontier", "explore_oracle", "explore_layout"):
+    names = ("wide", "finish", "explore", "frontier", "explore_oracle", "explore_layout")
+    for name in (*names, "explore_optimistic"):
         counts = records[name]["policy_counts"]
         assert counts["decisions"] == 2 * 8 * 3 and 0 < counts["played"] <= counts["decisions"]
         assert 2 * counts["played"] <= counts["play_outs"] <= 5 * counts["played"]
