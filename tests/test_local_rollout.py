@@ -253,6 +253,10 @@ def test_the_true_map_world_holds_what_the_team_has_not_seen() -> None:
     assert hopeful.act_env(env) == {"robot_0": WEST}
     with pytest.raises(ValueError, match=r"hidden must be one of .*got 'some'"):
         FixedTrueMap(east_best, hidden="some")
+    # With no point anywhere the true map has nothing to turn for; the hope still turns west.
+    env.reset(seed=0, options={"robot_nodes": [3], "interest_nodes": []})
+    assert FixedTrueMap(east_best, margin=0.5, base=always(WEST)).act_env(env) == {"robot_0": EAST}
+    assert hopeful.act_env(env) == {"robot_0": WEST}
     with pytest.raises(RuntimeError, match="plays through act_env"):
         oracle.act(observations)
     with pytest.raises(ValueError, match="frontier_as_interest does not apply"):
