@@ -129,7 +129,8 @@ def _world(
     """A coverage environment on ``graph``, reset with robots on ``robot_nodes`` ``(R,)`` (robot
     0 the planning one) and the points of interest ``interest`` ``(N,)`` bool not under a robot,
     for ``steps`` (at most ``horizon``; at least 1)."""
-    interest = interest & ~np.isin(np.arange(len(interest)), robot_nodes)
+    interest = interest.copy()
+    interest[robot_nodes] = False
     if horizon is not None:
         steps = min(steps, horizon)
     config = CoverageConfig(
@@ -172,8 +173,7 @@ def true_map_world(
     Raises:
         ValueError: ``hidden`` is none of those.
     """
-    if hidden not in HIDDEN_INTEREST:
-        raise ValueError(f"hidden must be one of {list(HIDDEN_INTEREST)}, got {hidden!r}")
+    _check_hidden(hidden)
     graph = snapshot.graph
     robot_node = snapshot.robot_node  # (R,)
     ball = np.flatnonzero(np.isfinite(graph.hop_distances(robot_node[[robot]], limit=hops)[0]))
@@ -188,6 +188,12 @@ def true_map_world(
         interest |= ~snapshot.discovered[ball]
     steps = snapshot.max_steps - snapshot.num_steps
     return _world(graph.subgraph(ball), nodes, interest, hops, steps, horizon)
+
+
+def _check_hidden(hidden: str) -> None:
+    """Raises ``ValueError`` naming ``hidden`` unless it is one of :data:`HIDDEN_INTEREST`."""
+    if hidden not in HIDDEN_INTEREST:
+        raise ValueError(f"hidden must be one of {list(HIDDEN_INTEREST)}, got {hidden!r}")
 
 
 def _cell_size(node_pos: np.ndarray, src: np.ndarray, dst: np.ndarray, metres: np.ndarray) -> float:
@@ -336,8 +342,7 @@ class TrueMapRolloutPolicy(LocalRolloutPolicy):
     def __init__(self, model: Any, hidden: str = "true", **kwargs: Any) -> None:
         if kwargs.get("frontier_as_interest"):
             raise ValueError("frontier_as_interest does not apply to the true map's world")
-        if hidden not in HIDDEN_INTEREST:
-            raise ValueError(f"hidden must be one of {list(HIDDEN_INTEREST)}, got {hidden!r}")
+        _check_hidden(hidden)
         super().__init__(model, **kwargs)
         self.hidden = hidden
         self._snapshot: CoverageSnapshot | None = None

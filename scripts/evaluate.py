@@ -81,10 +81,10 @@ POLICIES = (
     "gnn_rollout",
     "gnn_local_rollout",
 )
-#: Worlds of ``gnn_local_rollout``'s play-outs: the robot's view, or oracles on the true map.
-WORLDS = ("view", "true_map", "true_layout", "optimistic_layout")
 #: What each true-map world puts on the undiscovered waypoints (``TrueMapRolloutPolicy``'s hidden).
 _HIDDEN = {"true_map": "true", "true_layout": "none", "optimistic_layout": "all"}
+#: Worlds of ``gnn_local_rollout``'s play-outs: the robot's view, or oracles on the true map.
+WORLDS = ("view", *_HIDDEN)
 
 
 @dataclass
