@@ -394,8 +394,15 @@ def test_cli_plays_the_decentralized_rollout(tmp_path) -> None:
     assert "played" not in records["zero"]["policy_counts"]
     assert rewards["oracle"] == rewards["wide"]  # coverage: the view is the true map
     assert records["oracle"]["policy_counts"] == records["wide"]["policy_counts"]
-    names = ("wide", "finish", "explore", "frontier", "explore_oracle", "explore_layout")
-    for name in (*names, "explore_optimistic"):
+    for name in (
+        "wide",
+        "finish",
+        "explore",
+        "frontier",
+        "explore_oracle",
+        "explore_layout",
+        "explore_optimistic",
+    ):
         counts = records[name]["policy_counts"]
         assert counts["decisions"] == 2 * 8 * 3 and 0 < counts["played"] <= counts["decisions"]
         assert 2 * counts["played"] <= counts["play_outs"] <= 5 * counts["played"]
