@@ -1,13 +1,14 @@
 # make demo: set up .venv; the shipped GNN beside greedy and the expert on procedural cities (+ GIF).
 # make demo TASK=exploration: the same on the exploration task.
 # make test: set up .venv and run the test suite.
+# make docs: build the documentation site (site/).
 PYTHON ?= python3
 TASK ?= coverage
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-$(shell cat pyproject.toml constraints.txt | cksum | cut -d' ' -f1)
 
-.PHONY: demo test bench lint clean
+.PHONY: demo test bench docs lint dist clean
 
 $(STAMP): pyproject.toml constraints.txt
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -16,18 +17,26 @@ $(STAMP): pyproject.toml constraints.txt
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(PY) scripts/demo.py --task $(TASK)
+	$(VENV)/bin/marl-cover demo --task $(TASK)
 
 test: $(STAMP)
 	$(PY) -m pytest
 
 bench: $(STAMP)
-	$(PY) scripts/bench_env.py
+	$(VENV)/bin/marl-cover bench
+
+docs: $(STAMP)
+	$(VENV)/bin/mkdocs build --strict
 
 lint: $(STAMP)
-	$(PY) -m ruff check marl_cover agents scripts tests
-	$(PY) -m ruff format --check marl_cover agents scripts tests
-	$(PY) -m mypy
+	$(PY) -m ruff check marl_cover agents configs scripts tests
+	$(PY) -m ruff format --check marl_cover agents configs scripts tests
+	$(PY) tests/typecheck.py
+
+dist: $(STAMP)
+	rm -rf dist
+	$(PY) -m build --no-isolation
+	$(PY) -m twine check --strict dist/*
 
 clean:
-	rm -rf $(VENV) outputs .pytest_cache .hypothesis .mypy_cache
+	rm -rf $(VENV) outputs site dist build .pytest_cache .hypothesis .mypy_cache

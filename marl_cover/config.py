@@ -119,8 +119,10 @@ def config_from_dict(cls: type[T], values: dict[str, Any]) -> T:
 
 
 @dataclass(frozen=True)
-class CoverageConfig:
-    """Configuration of :class:`marl_cover.env.CoverageEnv` (defaults: the paper's setting).
+class EnvSettings:
+    """The settings of an environment that a file or a command line can hold (every field of
+    :class:`CoverageConfig` but the ready-made ``graph`` and the ``render_mode``); the
+    command line's ``env`` sections (``env.map=paper env.num_robots=10``).
 
     Attributes:
         task: ``"coverage"`` (the map is known from the start) or ``"exploration"`` (waypoints
@@ -146,8 +148,6 @@ class CoverageConfig:
             box per axis at each reset (``None``: the whole map). For ``map="paper"``: the
             fraction of its windows (``None``: the paper's 1/3).
         min_window_nodes: Smallest window accepted, in waypoints.
-        graph: A ready-made map; overrides ``map``.
-        render_mode: ``None``, ``"human"`` or ``"rgb_array"``.
         ego_backend: How ego-graphs are built: ``"auto"`` (``"numba"`` if installed, else
             ``"numpy"``), ``"numpy"`` or ``"numba"``; all give identical observations.
     """
@@ -167,15 +167,16 @@ class CoverageConfig:
     map_cell_size: float = 5.0
     window_fraction: float | None = None
     min_window_nodes: int = 200
-    graph: SpatialGraph | None = field(default=None, repr=False)
-    render_mode: str | None = None
     ego_backend: str = "auto"
 
     def __post_init__(self) -> None:
         if isinstance(self.map, os.PathLike):  # a grid file given as a Path
             object.__setattr__(self, "map", os.fspath(self.map))
         check_field_types(self)
-        checks = [
+        require(*self._checks())
+
+    def _checks(self) -> list[tuple[bool, str]]:
+        return [
             (self.task in TASKS, f"task must be one of {TASKS}, got {self.task!r}"),
             (self.sensor_range > 0, f"sensor_range must be > 0 metres, got {self.sensor_range}"),
             (self.num_robots >= 1, f"num_robots must be >= 1, got {self.num_robots}"),
@@ -206,19 +207,46 @@ class CoverageConfig:
                 f"window_fraction must be in (0, 1], got {self.window_fraction}",
             ),
             (
-                self.render_mode is None or self.render_mode in RENDER_MODES,
-                f"render_mode must be None or one of {RENDER_MODES}, got {self.render_mode!r}",
-            ),
-            (
                 self.ego_backend in ("auto", "numpy", "numba"),
                 f"ego_backend must be 'auto', 'numpy' or 'numba', got {self.ego_backend!r}",
+            ),
+        ]
+
+    @classmethod
+    def from_dict(cls, values: dict[str, Any]) -> EnvSettings:
+        """See :func:`config_from_dict`."""
+        return config_from_dict(cls, values)
+
+    def as_kwargs(self) -> dict[str, Any]:
+        """The settings as keyword arguments of :func:`marl_cover.parallel_env`."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(EnvSettings)}
+
+
+@dataclass(frozen=True)
+class CoverageConfig(EnvSettings):
+    """Configuration of :class:`marl_cover.env.CoverageEnv` (defaults: the paper's setting):
+    every field of :class:`EnvSettings`, and
+
+    Attributes:
+        graph: A ready-made map; overrides ``map``.
+        render_mode: ``None``, ``"human"`` or ``"rgb_array"``.
+    """
+
+    graph: SpatialGraph | None = field(default=None, repr=False)
+    render_mode: str | None = None
+
+    def _checks(self) -> list[tuple[bool, str]]:
+        return [
+            *super()._checks(),
+            (
+                self.render_mode is None or self.render_mode in RENDER_MODES,
+                f"render_mode must be None or one of {RENDER_MODES}, got {self.render_mode!r}",
             ),
             (
                 self.graph is None or isinstance(self.graph, SpatialGraph),
                 f"graph must be a SpatialGraph, got {type(self.graph).__name__}",
             ),
         ]
-        require(*checks)
 
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> CoverageConfig:

@@ -571,21 +571,6 @@ class CoverageEnv(ParallelEnv):
         self._episode_map()
         return self._build_state(*self._view(), self._discovery)
 
-    def privileged_state(self) -> dict[str, np.ndarray]:
-        """The true map in :meth:`state`'s encoding, for a critic trained with information the
-        robots do not have (asymmetric actor-critic): every waypoint and edge, in map order,
-        and every unvisited point of interest, discovered or not. In exploration the fourth
-        node column marks the waypoints the team has *not* discovered (where :meth:`state` has
-        the frontier); in coverage it is 0 and the result equals :meth:`state`. Same keys,
-        shapes and dtypes as :meth:`state`; no robot observes it.
-        """
-        self._episode_map()
-        robot_node, features = self._view()
-        if self._discovery is not None:
-            features = features.copy()
-            features[:, 3] = ~self._discovery.discovered
-        return self._build_state(robot_node, features, None)
-
     def _build_state(
         self, robot_node: np.ndarray, features: np.ndarray, discovery: Discovery | None
     ) -> dict[str, np.ndarray]:

@@ -16,10 +16,8 @@ import numpy as np
 from scipy.ndimage import distance_transform_edt
 
 from marl_cover.graph import SpatialGraph
+from marl_cover.paper_map import paper_map_path
 
-#: Environment variable that points at the paper's ``grid_slice10.npy``.
-PAPER_MAP_ENV = "MARL_COVER_PAPER_MAP"
-PAPER_MAP_NAME = "grid_slice10.npy"
 PAPER_CELL_SIZE = 5.0
 #: Perimeter of the paper's training graph (1266 waypoints) and generalization graph (5659).
 PAPER_PERIMETER = 2.0
@@ -169,35 +167,6 @@ def max_window_nodes(graph: SpatialGraph, fraction: float) -> int:
     h, w = min(span[1], rows), min(span[0], cols)  # y extent spans rows, x extent spans columns
     sums = table[h:, w:] - table[:-h, w:] - table[h:, :-w] + table[:-h, :-w]
     return int(sums.max())
-
-
-def paper_map_path() -> Path:
-    """Location of the paper's ``grid_slice10.npy``.
-
-    ``$MARL_COVER_PAPER_MAP`` when it is set; otherwise ``shared/maps/`` beside the repository
-    root, then ``../shared/maps/`` under the working directory.
-
-    Raises:
-        FileNotFoundError: ``$MARL_COVER_PAPER_MAP`` names no file (naming it), or no map was
-            found, listing every place looked at.
-    """
-    if os.environ.get(PAPER_MAP_ENV):
-        chosen = Path(os.environ[PAPER_MAP_ENV])
-        if not chosen.is_file():
-            raise FileNotFoundError(f"{PAPER_MAP_ENV}={chosen} names no file")
-        return chosen
-    candidates = []
-    repo_root = Path(__file__).resolve().parent.parent
-    candidates.append(repo_root.parent / "shared" / "maps" / PAPER_MAP_NAME)
-    candidates.append(Path.cwd().parent / "shared" / "maps" / PAPER_MAP_NAME)
-    for path in candidates:
-        if path.is_file():
-            return path
-    tried = ", ".join(dict.fromkeys(str(p) for p in candidates))  # each place once
-    raise FileNotFoundError(
-        f"the paper's map {PAPER_MAP_NAME} was not found (tried {tried}); "
-        f"set {PAPER_MAP_ENV} to its path"
-    )
 
 
 def paper_graph(perimeter: float = PAPER_PERIMETER) -> SpatialGraph:

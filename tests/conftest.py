@@ -2,11 +2,19 @@
 
 from __future__ import annotations
 
+import os
+import tempfile
+
 import numpy as np
 import pytest
 
 from marl_cover.graph import SpatialGraph
 from marl_cover.maps import paper_map_path
+
+# No test downloads anything, and none writes into the user's cache; scripts run as
+# subprocesses inherit both.
+os.environ["MARL_COVER_OFFLINE"] = "1"
+os.environ.setdefault("MARL_COVER_CACHE", tempfile.mkdtemp(prefix="marl_cover_cache_"))
 
 try:  # scatter ops slow down tenfold with two threads on the CI machines
     import torch

@@ -9,6 +9,7 @@ import runpy
 import subprocess
 import sys
 import traceback
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -29,33 +30,42 @@ def random_grid_graph(
     return graph_from_occupancy(occupied, cell_size=5.0)
 
 
-def run_script(script: str, *args: str) -> subprocess.CompletedProcess:
-    """``python scripts/<script> <args>`` from the repository root, run in this process.
+def run_cli(command: str, *args: str) -> subprocess.CompletedProcess:
+    """``marl-cover <command> <args>`` from the repository root, run in this process.
 
-    The script runs as ``__main__`` (its command-line entry, argument parsing and exit codes
-    included) without a new interpreter: no second import of torch and TorchRL, about 5 s
-    a call on the CI machines. Use a real subprocess where the script starts worker
-    processes.
-
-    Args:
-        script: File name under ``scripts/``.
-        *args: Its command-line arguments.
+    The command line's entry runs (argument parsing and exit codes included) without a new
+    interpreter: no second import of torch and TorchRL, about 5 s a call on the CI machines.
+    Use a real subprocess where the command starts worker processes.
 
     Returns:
         What ``subprocess.run(..., capture_output=True, text=True)`` returns: the exit code
         (``SystemExit``'s, or 1 and the traceback in ``stderr`` for an uncaught exception),
         ``stdout`` and ``stderr``.
     """
+    from marl_cover.agents.cli.main import main
+
+    return _in_process(["marl-cover", command, *args], lambda: main([command, *args]))
+
+
+def run_script(script: str, *args: str) -> subprocess.CompletedProcess:
+    """``python scripts/<script> <args>`` from the repository root, run in this process (as
+    :func:`run_cli`)."""
     path = ROOT / "scripts" / script
+    return _in_process(
+        [sys.executable, str(path), *args], lambda: runpy.run_path(str(path), run_name="__main__")
+    )
+
+
+def _in_process(argv: list[str], call: Callable[[], object]) -> subprocess.CompletedProcess:
     stdout, stderr = io.StringIO(), io.StringIO()
     saved_argv, saved_cwd, saved_path = sys.argv, os.getcwd(), list(sys.path)
     code = 0
     try:
         os.chdir(ROOT)
-        sys.argv = [str(path), *args]
+        sys.argv = [argv[1] if argv[0] == sys.executable else argv[0], *argv[2:]]
         with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
             try:
-                runpy.run_path(str(path), run_name="__main__")
+                call()
             except SystemExit as exit_:
                 if isinstance(exit_.code, int):
                     code = exit_.code
@@ -68,6 +78,4 @@ def run_script(script: str, *args: str) -> subprocess.CompletedProcess:
     finally:
         sys.argv, sys.path[:] = saved_argv, saved_path
         os.chdir(saved_cwd)
-    return subprocess.CompletedProcess(
-        [sys.executable, str(path), *args], code, stdout.getvalue(), stderr.getvalue()
-    )
+    return subprocess.CompletedProcess(argv, code, stdout.getvalue(), stderr.getvalue())

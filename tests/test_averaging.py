@@ -1,4 +1,5 @@
-"""Choosing a weight average of a run's snapshots (agents.averaging, scripts/select_average.py)."""
+"""Choosing a weight average of a run's snapshots (marl_cover.agents.training.averaging, marl-cover
+average)."""
 
 from __future__ import annotations
 
@@ -8,14 +9,15 @@ from pathlib import Path
 
 import pytest
 import torch
-from helpers import run_script
+from helpers import run_cli
 
 import marl_cover
-from agents import averaging
-from agents.averaging import select_window, snapshot_files, trailing_windows
-from agents.evaluation import evaluate
-from agents.models import AggregationGNN, GNNConfig
-from agents.models.policy import GNNPolicy, average_models, load_model, save_model
+from marl_cover.agents.evaluation.episodes import evaluate
+from marl_cover.agents.models import AggregationGNN, GNNConfig
+from marl_cover.agents.models.checkpoints import average_models, load_model, save_model
+from marl_cover.agents.models.policy import GNNPolicy
+from marl_cover.agents.training import averaging
+from marl_cover.agents.training.averaging import select_window, snapshot_files, trailing_windows
 
 ROOT = Path(__file__).resolve().parent.parent
 ENV = {"map": "city", "task": "coverage", "max_steps": 6}
@@ -78,7 +80,7 @@ def test_windows_play_their_average_and_resume_from_the_cache(tmp_path, monkeypa
     def no_play(*args, **kwargs):
         raise AssertionError("a cached window was played again")
 
-    monkeypatch.setattr("agents.evaluation.evaluate", no_play)
+    monkeypatch.setattr("marl_cover.agents.evaluation.episodes.evaluate", no_play)
     again, best_again = select_window(tmp_path / "run", [3, 1, 2], ENV, seeds, tmp_path / "cache")
     assert [r.rewards for r in again] == [r.rewards for r in results]
     assert best_again.steps == best.steps
@@ -100,17 +102,16 @@ def test_ties_go_to_the_larger_window(tmp_path, monkeypatch) -> None:
 
 
 def run_select(*args: str) -> subprocess.CompletedProcess:
-    """``scripts/select_average.py`` with ``args``."""
-    return run_script("select_average.py", *args)
+    """``marl-cover average`` with ``args``."""
+    return run_cli("average", *args)
 
 
 def test_cli_writes_the_chosen_average(tmp_path) -> None:
     files = make_run(tmp_path / "run")
     out = tmp_path / "avg"
     result = run_select(
-        str(tmp_path / "run"),
-        *("--sizes", "1", "3", "--map", "city", "--episodes", "2", "--seed", "3"),
-        *("--out", str(out)),
+        f"run={tmp_path / 'run'}",
+        *("sizes=[1,3]", "env.map=city", "episodes=2", "seed=3", f"out={out}"),
     )
     assert result.returncode == 0, result.stderr
     selection = json.loads((out / "selection.json").read_text())
@@ -124,15 +125,14 @@ def test_cli_writes_the_chosen_average(tmp_path) -> None:
     assert metadata["selection"]["chosen"] == chosen
     # a team and an episode length of the selection env's own (the mission's stand-in)
     team = run_select(
-        str(tmp_path / "run"),
-        *("--sizes", "1", "--map", "city", "--num-robots", "3", "--max-steps", "7"),
-        *("--episodes", "2", "--seed", "3", "--out", str(tmp_path / "team")),
+        f"run={tmp_path / 'run'}",
+        *("sizes=[1]", "env.map=city", "env.num_robots=3", "env.max_steps=7"),
+        *("episodes=2", "seed=3", f"out={tmp_path / 'team'}"),
     )
     assert team.returncode == 0, team.stderr
-    assert "num_robots 3, max_steps 7" in team.stdout
     (window,) = (tmp_path / "team" / "windows").iterdir()
     env = json.loads(window.read_text())["setup"]["env"]
     assert (env["num_robots"], env["max_steps"]) == (3, 7)
-    missing = run_select(str(tmp_path / "nothing"))
+    missing = run_select(f"run={tmp_path / 'nothing'}")
     assert missing.returncode != 0 and "no snapshot folder" in missing.stderr
     assert not (tmp_path / "nothing").exists()

@@ -10,8 +10,8 @@ pytest.importorskip("torchrl")
 
 from torchrl.envs.utils import check_env_specs  # noqa: E402
 
-from agents.batched_env import GRAPH_ARRAYS, STATE_KEYS, BatchedCoverageEnv  # noqa: E402
 from marl_cover import parallel_env  # noqa: E402
+from marl_cover.agents.training.batched_env import GRAPH_ARRAYS, STATE_KEYS, BatchedCoverageEnv  # noqa: E402
 
 #: A small procedural city with short episodes, so that a few dozen steps cross episode ends.
 CONFIG = {"num_robots": 3, "city_size": 60, "hops": 3, "max_steps": 7}
@@ -34,11 +34,6 @@ def assert_same_transition(td, envs, returns) -> None:  # noqa: ANN001
         state = env.state()
         for key in STATE_KEYS:
             np.testing.assert_array_equal(td["state", key][i].numpy(), state[key])
-        if "privileged" in td.keys():  # noqa: SIM118 (a TensorDict has no `in`)
-            privileged = env.privileged_state()
-            for key in STATE_KEYS:
-                got = td["privileged", key][i].numpy()
-                np.testing.assert_array_equal(got, privileged[key], err_msg=f"env {i} {key}")
         for key in ("new_interest", "total_interest", "blocked", "invalid_action"):
             assert td["robot", "info", key][i].tolist() == [infos[a][key] for a in agents]
         if len(ret) == 5:
@@ -64,23 +59,14 @@ def step_both(batched, td, envs, action):  # noqa: ANN001, ANN201
 
 
 @pytest.mark.parametrize(
-    ("allow_swaps", "task", "privileged"),
-    [
-        (True, "coverage", False),
-        (False, "coverage", False),
-        (True, "exploration", False),
-        (True, "exploration", True),
-    ],
+    ("allow_swaps", "task"), [(True, "coverage"), (False, "coverage"), (True, "exploration")]
 )
-def test_same_transitions_as_pettingzoo(allow_swaps: bool, task: str, privileged: bool) -> None:
+def test_same_transitions_as_pettingzoo(allow_swaps: bool, task: str) -> None:
     num_envs, seed = 3, 11
-    batched = BatchedCoverageEnv(
-        num_envs, allow_swaps=allow_swaps, task=task, privileged_state=privileged, **CONFIG
-    )
+    batched = BatchedCoverageEnv(num_envs, allow_swaps=allow_swaps, task=task, **CONFIG)
     batched.set_seed(seed)
     envs = [parallel_env(allow_swaps=allow_swaps, task=task, **CONFIG) for _ in range(num_envs)]
     td = batched.reset()
-    assert ("privileged" in td.keys()) == privileged  # noqa: SIM118
     assert_same_transition(td, envs, {i: env.reset(seed=seed + i) for i, env in enumerate(envs)})
     rng = np.random.default_rng(0)
     episodes_ended = 0
@@ -114,43 +100,6 @@ def test_check_env_specs_and_collector(task: str) -> None:
     lean = BatchedCoverageEnv(2, observe_robots=False, task=task, **CONFIG)
     check_env_specs(lean)
     assert "observation" not in lean.reset()["robot"]
-    check_env_specs(BatchedCoverageEnv(2, task=task, privileged_state=True, **CONFIG))
-
-
-def test_counterfactual_returns_of_each_step() -> None:
-    """With ``counterfactual_hops``, each step reports greedy's returns after every robot's
-    every move from the state it started from, the others on their actions: the values of
-    :func:`counterfactual_returns` on the PettingZoo environment before the same step; zeros
-    after a reset. The transitions themselves are unchanged."""
-    from agents.greedy import counterfactual_returns
-
-    num_envs, seed = 2, 4
-    batched = BatchedCoverageEnv(num_envs, counterfactual_hops=3, **CONFIG)
-    check_env_specs(batched)
-    batched.set_seed(seed)
-    envs = [parallel_env(**CONFIG) for _ in range(num_envs)]
-    td = batched.reset()
-    for i, env in enumerate(envs):
-        env.reset(seed=seed + i)
-    assert not td["robot", "info", "counterfactual"].any()
-    rng = np.random.default_rng(1)
-    varied = 0
-    for _ in range(6):  # within the first episode (max_steps 7)
-        action = rng.integers(0, 5, size=(num_envs, CONFIG["num_robots"]))
-        expected = np.stack(
-            [counterfactual_returns(env, 3, action[i]) for i, env in enumerate(envs)]
-        )
-        td = step_both(batched, td, envs, action)
-        got = td["next", "robot", "info", "counterfactual"]
-        assert got.dtype == torch.float32
-        np.testing.assert_array_equal(got.numpy(), expected)
-        varied += int((expected.max(-1) > expected.min(-1)).sum())
-        td = batched.step_mdp(td)
-    assert varied > 3  # some robots' moves matter
-    with pytest.raises(ValueError, match="counterfactual_hops must be >= 1"):
-        BatchedCoverageEnv(2, counterfactual_hops=0, **CONFIG)
-    with pytest.raises(ValueError, match="needs the coverage task"):
-        BatchedCoverageEnv(2, counterfactual_hops=3, task="exploration", **CONFIG)
 
 
 def test_rollout_is_seeded() -> None:

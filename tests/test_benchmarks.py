@@ -1,4 +1,5 @@
-"""The benchmark scripts: their JSON holds what their tables print, consistently."""
+"""The benchmarks (``marl-cover bench``, ``bench-gnn``; ``scripts/bench_*.py``): their JSON
+holds what their tables print, consistently."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ from pathlib import Path
 
 import pytest
 import torch
-from helpers import run_script
+from helpers import run_cli, run_script
 
 from marl_cover import parallel_env
 
@@ -23,9 +24,9 @@ WRAPPER = "e: PettingZooWrapper, collector"
 def test_bench_env_rates_match_their_counts_and_targets(tmp_path: Path) -> None:
     """Each case's rate is its steps over its seconds, its agent-steps its robots' share, its
     observation size that of a real reset, and its target met exactly when the rate reaches it;
-    ``--cases`` runs the named cases only."""
+    ``cases`` runs the named cases only."""
     out = tmp_path / "bench_env.json"
-    done = run_script("bench_env.py", "--seconds", "0.2", "--cases", "c", "a", "--out", str(out))
+    done = run_script("bench_env.py", "seconds=0.2", "cases=[c,a]", f"out={out}")
     assert done.returncode == 0, done.stderr
     results = json.loads(out.read_text())
     assert list(results) == [WINDOWS, CITY]  # the table's order, not the argument's
@@ -52,8 +53,8 @@ def test_bench_env_collection_ratio_is_measured_in_the_same_run(tmp_path: Path) 
     """Cases d and e collect whole batches (frames of ``num_envs`` episodes of 50 steps, and of
     100 steps) and their ratio is the quotient of the two rates."""
     out = tmp_path / "bench_env.json"
-    args = ["--seconds", "0.2", "--cases", "d", "e", "--num-envs", "2", "--out", str(out)]
-    done = run_script("bench_env.py", *args)
+    args = ["seconds=0.2", "cases=[d,e]", "--num_envs", "2", f"out={out}"]
+    done = run_cli("bench", *args)
     assert done.returncode == 0, done.stderr
     results = json.loads(out.read_text())
     assert list(results) == [BATCHED, WRAPPER, "ratio d / e"]
@@ -70,34 +71,18 @@ def test_bench_env_collection_ratio_is_measured_in_the_same_run(tmp_path: Path) 
 
 
 @pytest.mark.usefixtures("paper_map_available")
-def test_bench_env_times_the_counterfactual_returns_alone(tmp_path: Path) -> None:
-    """Case h runs without d and e: whole batches of the env that reports counterfactual
-    returns, with no target."""
-    out = tmp_path / "bench_env.json"
-    args = ["--seconds", "0.2", "--cases", "h", "--num-envs", "2", "--out", str(out)]
-    done = run_script("bench_env.py", *args)
-    assert done.returncode == 0, done.stderr
-    results = json.loads(out.read_text())
-    assert list(results) == ["h: d + counterfactual returns x2"]
-    (result,) = results.values()
-    assert result["config"]["counterfactual_hops"] == 19 and result["frames"] % 100 == 0
-    assert result["frames_per_s"] == pytest.approx(result["frames"] / result["seconds"])
-    assert result["target"] is None and result["meets_target"] is None
-
-
-@pytest.mark.usefixtures("paper_map_available")
 def test_bench_gnn_times_one_controller_in_every_mode(tmp_path: Path) -> None:
     """One row per model kind and case (4 robots at each K, then 100 robots at K = 19), the
     paper's time beside K = 9 and 19, a checkpoint's row at its own K, and the modes' logits
     equal: the decentralized, one-robot and centralized passes time the same controller."""
-    from agents.models import AggregationGNN, GNNConfig
-    from agents.models.policy import save_model
+    from marl_cover.agents.models import AggregationGNN, GNNConfig
+    from marl_cover.agents.models.checkpoints import save_model
 
     checkpoint = tmp_path / "wide.pt"
     save_model(checkpoint, AggregationGNN(GNNConfig(kind="nonlinear", hops=9, hidden=12)), {})
     out = tmp_path / "bench_gnn.json"
-    args = ["--hops", "3", "9", "--steps", "6", "--checkpoints", str(checkpoint), "--out", str(out)]
-    done = run_script("bench_gnn.py", *args)
+    args = ["hops=[3,9]", "steps=6", f"models=[{checkpoint}]", f"out={out}"]
+    done = run_cli("bench-gnn", *args)
     assert done.returncode == 0, done.stderr
     rows = json.loads(out.read_text())["rows"]
     assert [(r["kind"], r["hops"], r["robots"]) for r in rows] == [

@@ -1,80 +1,136 @@
-"""The scripts' helpers: ``key=value`` values, argparse types, atomic writes, setup-checked
-resume."""
+"""The ``marl-cover`` command line: every subcommand's help, the three layers of settings
+(preset, ``key=value``, ``--flag``), and the errors that name what is wrong."""
 
 from __future__ import annotations
 
-import argparse
-import json
-from pathlib import Path
+import re
+import subprocess
+import sys
+from dataclasses import dataclass, field
 
 import pytest
+from helpers import ROOT, run_cli
 
-from agents.cli import (
-    file_sha256,
-    non_negative_int,
-    parse_value,
-    positive_float,
-    positive_int,
-    read_result,
-    write_bytes_atomic,
-    write_text_atomic,
+from marl_cover.agents.cli import options
+from marl_cover.agents.cli.main import COMMANDS, main
+from marl_cover.config import EnvSettings
+
+
+def test_the_top_level_help_lists_every_command(capsys: pytest.CaptureFixture) -> None:
+    main(["--help"])
+    text = capsys.readouterr().out
+    for name in COMMANDS:
+        assert re.search(rf"^  {re.escape(name)} ", text, re.M), name
+    main(["--version"])
+    assert capsys.readouterr().out.startswith("marl-cover 1.")
+    with pytest.raises(SystemExit, match="unknown command 'train'; commands: demo, evaluate"):
+        main(["train"])
+
+
+@pytest.mark.parametrize("name", list(COMMANDS))
+def test_every_command_lists_its_options_with_types_and_defaults(name: str) -> None:
+    if name in ("train-bc", "train-mappo", "sweep", "bench-gnn", "average"):
+        pytest.importorskip("torch")
+    done = run_cli(name, "--help")
+    assert done.returncode == 0, done.stderr
+    text = done.stdout
+    assert f"usage: marl-cover {name}" in text
+    assert "-h, --help" in text and "key=value" in text
+    listed = [name for name in re.findall(r"^\W*(--[a-z_.]+)", text, re.M) if name != "--help"]
+    assert listed and text.count("(default:") >= len(listed)
+    types = re.findall(r"^\W*--[a-z_.]+ (\S+)", text, re.M)
+    assert all(re.fullmatch(r"[A-Z{\[][\w{}|.,\[\] ]*", kind) for kind in types), types
+
+
+def test_the_installed_console_script_runs() -> None:
+    """``marl-cover`` as the entry point pip installs, in its own interpreter."""
+    script = ROOT / ".venv" / "bin" / "marl-cover"
+    command = (
+        [str(script)] if script.exists() else [sys.executable, "-m", "marl_cover.agents.cli.main"]
+    )
+    done = subprocess.run(
+        [*command, "evaluate", "--help"], capture_output=True, text=True, timeout=120
+    )
+    assert done.returncode == 0, done.stderr
+    assert "--env.num_robots INT" in done.stdout and "(default: 4)" in done.stdout
+
+
+@dataclass
+class Inner:
+    """A section."""
+
+    hops: int = 3  # the inner count
+    rate: float | None = None  # a rate
+
+
+@dataclass
+class Outer:
+    """A config with a section and an environment."""
+
+    name: str = "run"  # a name
+    seeds: list[int] = field(default_factory=lambda: [0, 1])  # some seeds
+    inner: Inner = field(default_factory=Inner)
+    env: EnvSettings = field(default_factory=EnvSettings)
+
+
+def test_settings_come_in_three_layers(tmp_path) -> None:
+    preset = tmp_path / "preset.yaml"
+    preset.write_text("name: preset\ninner: {hops: 5}\nenv: {map: paper, num_robots: 7}\n")
+    args = ["--config", str(preset), "inner.rate=0.5", "seeds=[4,5,6]", "--name", "flag"]
+    config = options.parse(Outer, args, prog="test", description="x")
+    assert config == Outer(
+        name="flag",  # the flag over the preset
+        seeds=[4, 5, 6],
+        inner=Inner(hops=5, rate=0.5),
+        env=EnvSettings(map="paper", num_robots=7),
+    )
+    assert (
+        options.parse(Outer, ["env.hops=7", "--env.hops", "9"], prog="t", description="").env.hops
+        == 9
+    )
+
+
+def test_print_config_round_trips(tmp_path, capsys: pytest.CaptureFixture) -> None:
+    with pytest.raises(SystemExit) as done:
+        options.parse(Outer, ["--print-config", "inner.hops=8"], prog="t", description="")
+    assert done.value.code == 0
+    printed = tmp_path / "printed.yaml"
+    printed.write_text(capsys.readouterr().out)
+    assert options.load(Outer, printed) == Outer(inner=Inner(hops=8))
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["inner.depth=3"], "Key 'depth' not in 'Inner' (full_key: inner.depth)"),
+        (["seeds=[a]"], "could not be converted to Integer"),
+        (["env.num_robots=0"], "num_robots must be >= 1, got 0"),
+        (["--config", "nothing_here"], "no config file or preset 'nothing_here'; presets: ["),
+        (["--config"], "--config needs a preset name or a YAML file"),
+        (["env.task=flying"], "task must be one of ('coverage', 'exploration'), got 'flying'"),
+    ],
 )
+def test_bad_settings_end_with_one_line_that_names_them(args: list[str], message: str) -> None:
+    with pytest.raises(SystemExit) as done:
+        options.parse(Outer, args, prog="marl-cover test", description="")
+    assert str(done.value).startswith("marl-cover test: ")
+    assert message in str(done.value) and "\n" not in str(done.value)
 
 
-def test_parse_value() -> None:
-    assert parse_value("true") is True and parse_value("False") is False
-    assert parse_value("null") is None and parse_value("None") is None
-    assert parse_value("3") == 3 and isinstance(parse_value("3"), int)
-    assert parse_value("1e-4") == 1e-4
-    assert parse_value("[greedy,gnn]") == ["greedy", "gnn"]
-    assert parse_value("[1, 2.5]") == [1, 2.5] and parse_value("[]") == []
-    assert parse_value("outputs/run") == "outputs/run"
+def test_presets_are_found_by_name_from_any_folder(tmp_path, monkeypatch) -> None:
+    monkeypatch.chdir(tmp_path)
+    names = options.preset_names()
+    assert {"bc_coverage", "mappo_coverage", "mappo_finetune", "mission"} <= set(names)
+    assert options.preset_path("mappo_finetune").name == "mappo_finetune.yaml"
+    assert options.preset_path("configs/mappo_finetune.yaml").is_file()  # an old-style path
+    with pytest.raises(options.ConfigError, match="no config file or preset"):
+        options.preset_path("mappo_fine")
 
 
-def test_argparse_types_name_the_expectation() -> None:
-    assert positive_int("3") == 3 and non_negative_int("0") == 0 and positive_float("0.5") == 0.5
-    for parse, text, expected in [
-        (positive_int, "0", "an integer >= 1, got '0'"),
-        (positive_int, "2.5", "an integer >= 1, got '2.5'"),
-        (non_negative_int, "-1", "an integer >= 0, got '-1'"),
-        (positive_float, "0", "a number > 0, got '0'"),
-        (positive_float, "inf", "a number > 0, got 'inf'"),
-        (positive_float, "soon", "a number > 0, got 'soon'"),
-    ]:
-        with pytest.raises(argparse.ArgumentTypeError, match=f"expected {expected}"):
-            parse(text)
-
-
-def test_atomic_writes_leave_no_temporary_file(tmp_path: Path) -> None:
-    path = write_text_atomic(tmp_path / "deep" / "a.json", "{}")
-    assert path.read_text() == "{}"
-    write_bytes_atomic(path, b"[1]")
-    assert path.read_bytes() == b"[1]"
-    assert sorted(p.name for p in path.parent.iterdir()) == ["a.json"]
-
-
-def test_file_sha256_names_the_content(tmp_path: Path) -> None:
-    a, b = tmp_path / "a.pt", tmp_path / "b.pt"
-    a.write_bytes(b"weights")
-    b.write_bytes(b"weights")
-    assert file_sha256(a) == file_sha256(b)
-    assert file_sha256(a) == "9a129038d9a00aed0cf6a7ea059ca50a813449061ab87848cf1a13eafdf33b2c"
-    b.write_bytes(b"other weights")
-    assert file_sha256(a) != file_sha256(b)
-
-
-def test_read_result_checks_the_setup(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
-    setup = {"method": "gnn", "robots": 10, "range": (3.0, 8.0)}
-    path = tmp_path / "gnn_R10.json"
-    path.write_text(json.dumps({"mean": 1.5, "setup": setup}))
-    assert read_result(path, setup)["mean"] == 1.5  # a tuple reads back as a list: same setup
-    with pytest.raises(
-        ValueError, match=r"gnn_R10.json was made under another setup .*\['robots'\]"
-    ):
-        read_result(path, {**setup, "robots": 20})
-    with pytest.raises(ValueError, match=r"differs in \['model_sha256'\]"):
-        read_result(path, {**setup, "model_sha256": "abc"})
-    old = tmp_path / "old.json"
-    old.write_text(json.dumps({"mean": 2.0}))
-    assert read_result(old, setup)["mean"] == 2.0
-    assert "old.json does not record its setup" in capsys.readouterr().out
+def test_a_command_reads_its_default_preset(tmp_path) -> None:
+    pytest.importorskip("torch")
+    done = run_cli("train-mappo", "--print-config", f"out={tmp_path / 'x'}")
+    assert done.returncode == 0, done.stderr
+    assert "out: " in done.stdout and "n_iters: 250" in done.stdout  # mappo_coverage
+    done = run_cli("train-mappo", "--print-config", "--config", "mappo_finetune_8000")
+    assert "frames_per_batch: 8000" in done.stdout

@@ -9,7 +9,7 @@ import subprocess
 import sys
 import textwrap
 
-from helpers import ROOT, run_script
+from helpers import ROOT, run_cli
 
 OPTIONAL = ("torch", "torchrl", "tensordict", "ortools", "pyvrp", "numba", "matplotlib", "networkx")
 
@@ -68,11 +68,10 @@ SCRIPT = BLOCKER + textwrap.dedent(
 
 BASELINES = BLOCKER + textwrap.dedent(
     """
-    import runpy
+    from marl_cover.agents.cli.main import main
 
     for args in ARGS:
-        sys.argv = ["evaluate.py", *args]
-        runpy.run_path("scripts/evaluate.py", run_name="__main__")
+        main(["evaluate", *args])
     leaked = sorted(m for m in sys.modules if m.split(".")[0] in BLOCKED)
     assert not leaked, leaked
     print("baselines ok")
@@ -98,18 +97,18 @@ def test_environments_run_without_the_optional_packages() -> None:
 
 
 def test_baselines_are_evaluated_without_torch(tmp_path) -> None:  # noqa: ANN001
-    """Greedy and the routing expert, evaluated by ``scripts/evaluate.py`` where torch cannot
+    """Greedy and the routing expert, evaluated by ``marl-cover evaluate`` where torch cannot
     be imported, play the episodes they play beside it."""
     runs = {
-        "greedy": ["policy=greedy", "map=city", "episodes=2"],
-        "expert": ["policy=expert", "map=city", "episodes=1", "expert.iterations=50"],
+        "greedy": ["policy=greedy", "env.map=city", "episodes=2"],
+        "expert": ["policy=expert", "env.map=city", "episodes=1", "expert.iterations=50"],
     }
     blocked = [[*args, f"out={tmp_path / name}.json"] for name, args in runs.items()]
     done = run_blocked(f"ARGS = {blocked!r}\n" + BASELINES, "torch", "torchrl", "tensordict")
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip().splitlines()[-1] == "baselines ok"
     for name, args in runs.items():
-        beside = run_script("evaluate.py", *args, f"out={tmp_path / name}_beside.json")
+        beside = run_cli("evaluate", *args, f"out={tmp_path / name}_beside.json")
         assert beside.returncode == 0, beside.stderr
         without = json.loads((tmp_path / f"{name}.json").read_text())["summary"]
         with_torch = json.loads((tmp_path / f"{name}_beside.json").read_text())["summary"]

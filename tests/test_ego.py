@@ -5,7 +5,7 @@ from __future__ import annotations
 import networkx as nx
 import numpy as np
 import pytest
-from helpers import random_grid_graph, run_script
+from helpers import random_grid_graph, run_cli
 
 import marl_cover
 from marl_cover.ego import NUM_ACTIONS, action_targets
@@ -129,16 +129,14 @@ def test_inspect_ego_script_draws_one_robots_view(tmp_path) -> None:
     pytest.importorskip("matplotlib")
     pytest.importorskip("networkx")
     out = tmp_path / "ego.png"
-    done = run_script(
-        "inspect_ego.py", "--hops", "4", "--robot", "1", "--steps", "2", "--out", str(out)
-    )
+    done = run_cli("inspect", "env.hops=4", "robot=1", "steps=2", f"out={out}")
     assert done.returncode == 0, done.stderr
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     for args, message in (
-        (["--seed", "-1"], "--seed: expected an integer >= 0, got '-1'"),
-        (["--robot", "4"], "--robot must be in [0, 4)"),
-        (["--map", "nowhere.npy"], "occupancy grid not found: nowhere.npy"),
+        (["seed=-1"], "seed and steps must be >= 0"),
+        (["robot=4"], "robot must be in [0, 4), got 4"),
+        (["env.map=nowhere.npy"], "occupancy grid not found: nowhere.npy"),
     ):
-        refused = run_script("inspect_ego.py", *args, "--out", str(out))
+        refused = run_cli("inspect", *args, f"out={out}")
         assert refused.returncode != 0 and message in refused.stderr
         assert "Traceback" not in refused.stderr

@@ -8,11 +8,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import run_script
+from helpers import run_cli
 
 import marl_cover
-from agents.evaluation import EpisodeResult, evaluate, summarize
-from agents.greedy import CentralizedGreedyPolicy, GreedyPolicy
+from marl_cover.agents.baselines.greedy import CentralizedGreedyPolicy, GreedyPolicy
+from marl_cover.agents.evaluation.episodes import EpisodeResult, evaluate, summarize
 
 
 def test_summary_statistics() -> None:
@@ -35,14 +35,14 @@ def test_paired_seeds_give_paired_results() -> None:
     assert all(0 < r.coverage <= 1 for r in local.results)
 
 
-def run_cli(*args: str) -> subprocess.CompletedProcess:
-    return run_script("evaluate.py", *args)
+def evaluate_cli(*args: str) -> subprocess.CompletedProcess:
+    return run_cli("evaluate", *args)
 
 
 def test_cli_writes_json_and_csv(tmp_path) -> None:
     out = tmp_path / "greedy.json"
-    result = run_cli(
-        "policy=greedy", "hops=5", "episodes=3", "seed=7", "max_steps=10", f"out={out}"
+    result = evaluate_cli(
+        "policy=greedy", "env.hops=5", "episodes=3", "seed=7", "env.max_steps=10", f"out={out}"
     )
     assert result.returncode == 0, result.stderr
     record = json.loads(out.read_text())
@@ -53,35 +53,49 @@ def test_cli_writes_json_and_csv(tmp_path) -> None:
 
 def test_cli_evaluates_a_receding_expert_blind_to_the_clock(tmp_path) -> None:
     pytest.importorskip("pyvrp")
-    from agents.experts import RoutingExpert
+    from marl_cover.agents.experts import RoutingExpert
 
     out = tmp_path / "blind.json"
-    args = ("policy=expert_rh", "hops=4", "episodes=2", "seed=3", "max_steps=8", "num_robots=2")
-    result = run_cli(*args, "expert.clock=false", "expert.iterations=20", f"out={out}")
+    args = (
+        "policy=expert_rh",
+        "env.hops=4",
+        "episodes=2",
+        "seed=3",
+        "env.max_steps=8",
+        "env.num_robots=2",
+    )
+    result = evaluate_cli(*args, "expert.clock=false", "expert.iterations=20", f"out={out}")
     assert result.returncode == 0, result.stderr
     rewards = [r["reward"] for r in json.loads(out.read_text())["summary"]["results"]]
     env = marl_cover.parallel_env(max_steps=8, num_robots=2, hops=4)
     expert = RoutingExpert(mode="receding", horizon=4, clock=False, max_iterations=20)
     assert rewards == [r.reward for r in evaluate(env, expert, [3, 4]).results]
-    result = run_cli("policy=expert", "expert.clock=false")
+    result = evaluate_cli("policy=expert", "expert.clock=false")
     assert result.returncode != 0 and "policy=expert_rh and expert_local only" in result.stderr
     near = tmp_path / "near.json"
-    result = run_cli(*args, "expert.iterations=20", "expert.fallback_reach=2", f"out={near}")
+    result = evaluate_cli(*args, "expert.iterations=20", "expert.fallback_reach=2", f"out={near}")
     assert result.returncode == 0, result.stderr
     rewards = [r["reward"] for r in json.loads(near.read_text())["summary"]["results"]]
     expert = RoutingExpert(mode="receding", horizon=4, max_iterations=20, fallback_reach=2)
     assert rewards == [r.reward for r in evaluate(env, expert, [3, 4]).results]
-    result = run_cli("policy=gnn", "expert.fallback_reach=3")
+    result = evaluate_cli("policy=gnn", "expert.fallback_reach=3")
     assert result.returncode != 0 and "policy=expert and expert_rh only" in result.stderr
 
 
 def test_cli_evaluates_the_local_expert(tmp_path) -> None:
     pytest.importorskip("pyvrp")
-    from agents.experts import LocalRoutingExpert
+    from marl_cover.agents.experts import LocalRoutingExpert
 
     out = tmp_path / "local.json"
-    args = ("policy=expert_local", "hops=3", "episodes=2", "seed=3", "max_steps=8", "num_robots=3")
-    result = run_cli(*args, "expert.clock=false", "expert.iterations=20", f"out={out}")
+    args = (
+        "policy=expert_local",
+        "env.hops=3",
+        "episodes=2",
+        "seed=3",
+        "env.max_steps=8",
+        "env.num_robots=3",
+    )
+    result = evaluate_cli(*args, "expert.clock=false", "expert.iterations=20", f"out={out}")
     assert result.returncode == 0, result.stderr
     record = json.loads(out.read_text())
     rewards = [r["reward"] for r in record["summary"]["results"]]
@@ -89,84 +103,69 @@ def test_cli_evaluates_the_local_expert(tmp_path) -> None:
     expert = LocalRoutingExpert(3, clock=False, max_iterations=20, fallback="random")
     assert rewards == [r.reward for r in evaluate(env, expert, [3, 4]).results]
     assert record["summary"]["policy_counts"]["solves"] == 2 * 8 * 3  # a solve per robot-step
-    result = run_cli("policy=expert_local", "expert.information=known")
+    result = evaluate_cli("policy=expert_local", "expert.information=known")
     assert result.returncode != 0 and "does not apply to policy=expert_local" in result.stderr
 
 
 def test_cli_rejects_unknown_keys() -> None:
-    result = run_cli("polcy=greedy")
+    result = evaluate_cli("polcy=greedy")
     assert result.returncode != 0 and "polcy" in result.stderr
-    result = run_cli("expert.budget=3")
+    result = evaluate_cli("expert.budget=3")
     assert result.returncode != 0 and "expert.budget" in result.stderr
 
 
 @pytest.mark.parametrize(
     ("argument", "message"),
     [
-        ("episodes=abc", "EvaluateOptions.episodes must be an integer, got 'abc'"),
-        ("expert.time_limit=soon", "ExpertOptions.time_limit must be a number"),
-        ("num_robots=x", "CoverageConfig.num_robots must be an integer, got 'x'"),
-        ("window_fraction=3", "window_fraction must be in (0, 1], got 3"),
+        ("episodes=abc", "Value 'abc' of type 'str' could not be converted to Integer"),
+        ("expert.time_limit=soon", "(full_key: expert.time_limit)"),
+        ("env.num_robots=x", "(full_key: env.num_robots)"),
+        ("env.window_fraction=3", "window_fraction must be in (0, 1], got 3"),
         ("gnn.temperature=0.5", "needs gnn.deterministic=false"),
-        ("episodes=0", "episodes must be >= 1 and seed >= 0, got episodes=0 seed=0"),
-        ("seed=-3", "episodes must be >= 1 and seed >= 0, got episodes=100 seed=-3"),
-        ("map=missing_grid.npy", "occupancy grid not found: missing_grid.npy"),
-        ("checkpoint=README.md policy=gnn", "README.md is not a model file (UnpicklingError"),
-        ("checkpoint=missing.pt policy=gnn", "no model file at missing.pt"),
+        ("episodes=0", "episodes must be >= 1 and seed >= 0"),
+        ("seed=-3", "episodes must be >= 1 and seed >= 0"),
+        ("policy=greedy model=gnn", "model= applies to the gnn policies, not policy=greedy"),
+        ("policy=gnn --seed -1", "episodes must be >= 1 and seed >= 0"),
+        ("env.map=missing_grid.npy", "occupancy grid not found: missing_grid.npy"),
+        ("model=README.md policy=gnn", "README.md is not a model file (UnpicklingError"),
+        ("model=missing.pt policy=gnn", "no model file at missing.pt"),
         ("policy=gnn_rollout gnn.deterministic=false", "do not apply to policy=gnn_rollout"),
         ("policy=gnn gnn.spread=0.5 gnn.centralized=true", "on the robots' ego-graphs"),
         ("policy=greedy gnn.spread=0.5", "a margin >= 0 for policy=gnn"),
-        ("policy=gnn gnn.spread=-1", "gnn.spread=-1: a margin >= 0"),
+        ("policy=gnn gnn.spread=-1", "gnn.spread=-1.0: a margin >= 0"),
         ("policy=gnn gnn.margin=0.5", "apply to policy=gnn_local_rollout only"),
         ("policy=gnn_local_rollout gnn.horizon=0", "needs gnn.margin >= 0, gnn.horizon >= 1"),
-        ("policy=gnn_local_rollout gnn.margin=-1", "got gnn.margin=-1 gnn.horizon=None"),
+        ("policy=gnn_local_rollout gnn.margin=-1", "got gnn.margin=-1.0 gnn.horizon=None"),
         ("policy=gnn_local_rollout gnn.greedy_after=-2", "gnn.greedy_after=-2"),
         ("policy=gnn gnn.greedy_after=1", "gnn.greedy_after applies to policy=gnn_rollout or"),
         ("policy=gnn_rollout gnn.greedy_after=0", "needs gnn.greedy_after >= 1 (or null), got 0"),
         ("policy=gnn_local_rollout gnn.centralized=true", "do not apply to policy=gnn_local"),
-        ("policy=gnn gnn.world=true_map", "gnn.world apply to policy=gnn_local_rollout only"),
-        ("policy=gnn_local_rollout gnn.world=oracle", "gnn.world must be one of ['view', "),
-        (
-            "policy=gnn_local_rollout gnn.world=true_layout gnn.frontier_as_interest=true",
-            "gnn.frontier_as_interest does not apply to gnn.world=true_layout",
-        ),
     ],
 )
 def test_cli_names_bad_values(argument: str, message: str) -> None:
-    result = run_cli(*argument.split())
+    result = evaluate_cli(*argument.split())
     assert result.returncode != 0 and message in result.stderr
     assert "Traceback" not in result.stderr
 
 
 def test_reproduce_paper_resumes_and_prints_the_table(tmp_path, paper_map_available) -> None:
-    command = [
-        "--methods",
-        "greedy",
-        "--hops",
-        "3",
-        "--episodes",
-        "2",
-        "--out",
-        str(tmp_path),
-    ]
-    first = run_script("reproduce_paper.py", *command)
+    command = ["methods=[greedy]", "hops=[3]", "episodes=2", f"out={tmp_path}"]
+    first = run_cli("reproduce-paper", *command)
     assert first.returncode == 0, first.stderr
     assert "done greedy K=3" in first.stdout
     record = json.loads((tmp_path / "greedy_K3.json").read_text())
     assert set(record) >= {"T50", "T49"}
-    second = run_script("reproduce_paper.py", *command)
+    second = run_cli("reproduce-paper", *command)
     assert "done greedy" not in second.stdout  # resumed: nothing left to run
-    from agents.paper import PAPER_CSV
-
-    if PAPER_CSV.is_file():  # the reference lies beside the repository, not in a clone elsewhere
-        assert "57.4 +- 1.66" in second.stdout  # the paper's greedy at K = 3, beside ours
+    assert "57.4 +- 1.66" in second.stdout  # the paper's greedy at K = 3, beside ours
     assert (tmp_path / "coverage.png").exists()
 
 
 def test_cli_evaluates_a_gnn_checkpoint_both_ways(tmp_path) -> None:
     torch = pytest.importorskip("torch")
-    from agents.models import AggregationGNN, GNNConfig
-    from agents.models.policy import GNNPolicy, save_model
+    from marl_cover.agents.models import AggregationGNN, GNNConfig
+    from marl_cover.agents.models.checkpoints import save_model
+    from marl_cover.agents.models.policy import GNNPolicy
 
     torch.manual_seed(0)
     model = AggregationGNN(GNNConfig(kind="nonlinear", hops=4))
@@ -174,31 +173,31 @@ def test_cli_evaluates_a_gnn_checkpoint_both_ways(tmp_path) -> None:
     rewards = []
     for centralized in ("false", "true"):
         out = tmp_path / f"gnn_{centralized}.json"
-        result = run_cli(
+        result = evaluate_cli(
             "policy=gnn",
-            f"checkpoint={tmp_path / 'm.pt'}",
+            f"model={tmp_path / 'm.pt'}",
             f"gnn.centralized={centralized}",
             "episodes=3",
-            "max_steps=10",
+            "env.max_steps=10",
             f"out={out}",
         )
         assert result.returncode == 0, result.stderr
         record = json.loads(out.read_text())
-        assert record["env"]["hops"] == 4  # the model's receptive field
+        assert record["config"]["env"]["hops"] == 4  # the model's receptive field
         assert record["gnn"]["note"] == "random weights"
         rewards.append([r["reward"] for r in record["summary"]["results"]])
     env = marl_cover.parallel_env(hops=4, max_steps=10)
     for centralized, got in zip((False, True), rewards, strict=True):
         expected = evaluate(env, GNNPolicy(model, centralized=centralized), range(3))
         assert got == [r.reward for r in expected.results]
-    result = run_cli("policy=gnn", f"checkpoint={tmp_path / 'missing.pt'}", "episodes=1")
+    result = evaluate_cli("policy=gnn", f"model={tmp_path / 'missing.pt'}", "episodes=1")
     assert result.returncode != 0 and "missing.pt" in result.stderr
 
 
 def test_sampling_temperature_sharpens_toward_the_argmax() -> None:
     torch = pytest.importorskip("torch")
-    from agents.models import AggregationGNN, GNNConfig
-    from agents.models.policy import GNNPolicy
+    from marl_cover.agents.models import AggregationGNN, GNNConfig
+    from marl_cover.agents.models.policy import GNNPolicy
 
     torch.manual_seed(0)
     model = AggregationGNN(GNNConfig(kind="nonlinear", hops=3)).double()
@@ -221,66 +220,6 @@ def test_sampling_temperature_sharpens_toward_the_argmax() -> None:
         GNNPolicy(model, deterministic=False, temperature=0)
 
 
-def test_cli_evaluates_an_ensemble_of_checkpoints(tmp_path) -> None:
-    torch = pytest.importorskip("torch")
-    from agents.models import AggregationGNN, GNNConfig
-    from agents.models.policy import EnsemblePolicy, save_model
-
-    torch.manual_seed(0)
-    models = [AggregationGNN(GNNConfig(kind="nonlinear", hops=h)) for h in (3, 5)]
-    paths = [tmp_path / f"m{i}.pt" for i in range(2)]
-    for model, path in zip(models, paths, strict=True):
-        save_model(path, model, {})
-    out = tmp_path / "ensemble.json"
-    checkpoint = ",".join(map(str, paths))
-    result = run_cli(
-        "policy=gnn", f"checkpoint={checkpoint}", "episodes=3", "max_steps=10", f"out={out}"
-    )
-    assert result.returncode == 0, result.stderr
-    record = json.loads(out.read_text())
-    assert record["env"]["hops"] == 5  # the largest receptive field
-    assert record["gnn"]["ensemble"] == [str(p) for p in paths]
-    env = marl_cover.parallel_env(hops=5, max_steps=10)
-    expected = evaluate(env, EnsemblePolicy(models), range(3))
-    assert [r["reward"] for r in record["summary"]["results"]] == [
-        r.reward for r in expected.results
-    ]
-    result = run_cli("policy=gnn", f"checkpoint={paths[0]},{tmp_path / 'gone.pt'}", "episodes=1")
-    assert result.returncode != 0 and "gone.pt" in result.stderr
-
-
-def test_merged_ensemble_file_plays_the_ensembles_episodes(tmp_path) -> None:
-    torch = pytest.importorskip("torch")
-    from agents.models import AggregationGNN, GNNConfig
-    from agents.models.policy import EnsemblePolicy, GNNPolicy, load_model, save_model
-
-    torch.manual_seed(1)
-    models = [AggregationGNN(GNNConfig(kind="nonlinear", hops=4)) for _ in range(3)]
-    paths = [tmp_path / f"m{i}.pt" for i in range(3)]
-    for model, path in zip(models, paths, strict=True):
-        save_model(path, model, {})
-    merged_path = tmp_path / "merged.pt"
-    done = run_script("average_models.py", "--logits", str(merged_path), *map(str, paths))
-    assert done.returncode == 0, done.stderr
-    assert "width 48" in done.stdout
-    merged, metadata = load_model(merged_path)
-    assert metadata == {"merged_of": [str(p) for p in paths]}
-    env = marl_cover.parallel_env(hops=4, max_steps=12)
-    expected = evaluate(env, EnsemblePolicy(models), range(4))
-    played = evaluate(env, GNNPolicy(merged), range(4))
-    assert [r.reward for r in played.results] == [r.reward for r in expected.results]
-    observations, _ = env.reset(seed=9)
-    for _ in range(6):  # the same action for every robot, not just the same totals
-        actions = GNNPolicy(merged).act(observations)
-        assert actions == EnsemblePolicy(models).act(observations)
-        observations = env.step(actions)[0]
-    wide = tmp_path / "wide.pt"
-    save_model(wide, AggregationGNN(GNNConfig(kind="nonlinear", hops=4, hidden=8)), {})
-    bad = [str(merged_path), str(paths[0]), str(wide)]
-    refused = run_script("average_models.py", "--logits", *bad)
-    assert refused.returncode != 0 and "wide.pt holds a" in refused.stderr
-
-
 def write_rewards(path: Path, rewards: dict[int, float]) -> Path:
     lines = ["seed,reward,coverage"] + [f"{s},{r},0.5" for s, r in rewards.items()]
     path.write_text("\n".join(lines) + "\n")
@@ -288,7 +227,7 @@ def write_rewards(path: Path, rewards: dict[int, float]) -> Path:
 
 
 def test_paired_comparison_of_two_runs(tmp_path: Path) -> None:
-    from agents.comparison import compare, read_rewards
+    from marl_cover.agents.evaluation.comparison import compare, read_rewards
 
     base = read_rewards(write_rewards(tmp_path / "a.csv", {0: 10.0, 1: 20.0, 2: 30.0}))
     # same seeds in another order: differences +2, -1, +5
@@ -314,7 +253,7 @@ def write_mission(path: Path, seeds: list[int], totals: dict[str, list[float]]) 
 
 
 def test_mission_tables_are_paired_by_method(tmp_path: Path) -> None:
-    from agents.comparison import compare, read_run
+    from marl_cover.agents.evaluation.comparison import compare, read_run
 
     table = write_mission(
         tmp_path / "mission.json", [3, 4], {"greedy": [100.0, 200.0], "gnn": [130.0, 220.0]}
@@ -337,7 +276,7 @@ def test_mission_tables_are_paired_by_method(tmp_path: Path) -> None:
 
 
 def test_comparison_refuses_unpaired_or_broken_files(tmp_path: Path) -> None:
-    from agents.comparison import compare, read_rewards
+    from marl_cover.agents.evaluation.comparison import compare, read_rewards
 
     with pytest.raises(ValueError, match=r"a and b are not paired: seeds only in a \[2\] \(1\)"):
         compare({0: 1.0, 1: 1.0, 2: 1.0}, {0: 1.0, 1: 2.0}, "a", "b")
@@ -363,17 +302,17 @@ def test_compare_script_prints_and_writes_the_table(tmp_path: Path) -> None:
     base = write_rewards(tmp_path / "greedy.csv", {0: 10.0, 1: 20.0})
     other = write_rewards(tmp_path / "gnn.csv", {0: 13.0, 1: 21.0})
     out = tmp_path / "cmp.json"
-    done = run_script("compare.py", str(base), str(other), "--out", str(out))
+    done = run_cli("compare", f"runs=[{base},{other}]", f"out={out}")
     assert done.returncode == 0, done.stderr
     assert "+2.00 +- 1.00" in done.stdout and "1.133" in done.stdout
     assert "1.175 +- 0.125" in done.stdout  # per-seed ratios 1.3 and 1.05
     assert json.loads(out.read_text())[0]["difference"] == 2.0
-    bad = run_script("compare.py", str(base), str(tmp_path / "missing.csv"))
+    bad = run_cli("compare", f"runs=[{base},{tmp_path / 'missing.csv'}]")
     assert bad.returncode == 1 and "missing.csv" in bad.stderr
 
 
 def test_generalize_names_a_bad_model_file() -> None:
     for path, message in (("no.pt", "no model file at no.pt"), ("README.md", "not a model file")):
-        result = run_script("generalize.py", "--checkpoint", path, "--robots", "10")
+        result = run_cli("generalize", f"model={path}", "robots=[10]")
         assert result.returncode != 0 and message in result.stderr
         assert "Traceback" not in result.stderr

@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 
 import marl_cover
-from agents.evaluation import evaluate
-from agents.experts import LocalRoutingExpert, RoutingExpert, build_problem, solve
+from marl_cover.agents.evaluation.episodes import evaluate
+from marl_cover.agents.experts import LocalRoutingExpert, RoutingExpert, build_problem, solve
 
 pytest.importorskip("pyvrp")
 pytest.importorskip("ortools")

@@ -96,35 +96,6 @@ def test_range_is_euclidean_and_the_known_graph_keeps_only_known_edges(u_graph) 
     assert int(env.state()["edge_mask"][10:].sum()) == 12
 
 
-def test_privileged_state_is_the_true_map_with_the_undiscovered_marked(u_graph) -> None:  # noqa: ANN001
-    env, _ = explore(u_graph, [0], [4, 6], sensor_range=12.0, hops=8)
-    privileged = env.privileged_state()
-    assert privileged.keys() == env.state().keys()
-    for key, value in privileged.items():
-        assert value.shape == env.state()[key].shape and value.dtype == env.state()[key].dtype
-    # every waypoint in map order; 4 (undiscovered) is a point of interest and marked unknown
-    assert int(privileged["node_mask"].sum()) == 1 + 7
-    assert privileged["nodes"][1:8, 1].tolist() == [1] * 7
-    assert privileged["nodes"][1:8, 2].tolist() == [0, 0, 0, 0, 1, 0, 1]
-    assert privileged["nodes"][1:8, 3].tolist() == [0, 0, 0, 0, 1, 0, 0]
-    assert int(privileged["edge_mask"][10:].sum()) == 12  # all six lattice edges, both ways
-    # the robot on 0, then the waypoints 0..6
-    assert privileged["node_pos"][:8].tolist() == [
-        [0, 0], [0, 0], [1, 0], [2, 0], [2, 1], [2, 2], [1, 2], [0, 2]
-    ]  # fmt: skip
-    assert int(privileged["steps_left"]) == env.config.max_steps
-    env.step({"robot_0": 1})
-    env.step({"robot_0": 1})  # at 2: 4 is discovered, nothing is unknown
-    privileged = env.privileged_state()
-    assert privileged["nodes"][1:8, 3].tolist() == [0] * 7
-    assert int(privileged["steps_left"]) == env.config.max_steps - 2
-    # in coverage it is the state
-    coverage = marl_cover.parallel_env(graph=u_graph, num_robots=1, hops=8)
-    coverage.reset(options={"robot_nodes": [0], "interest_nodes": [3, 4]})
-    for key, value in coverage.privileged_state().items():
-        np.testing.assert_array_equal(value, coverage.state()[key], err_msg=key)
-
-
 def test_coverage_is_exploration_with_everything_known(u_graph) -> None:  # noqa: ANN001
     coverage = marl_cover.parallel_env(graph=u_graph, num_robots=1, hops=8)
     observations, _ = coverage.reset(options={"robot_nodes": [0], "interest_nodes": [3, 4]})
@@ -231,7 +202,7 @@ def test_same_seed_same_exploration_episode() -> None:
 
 
 def test_greedy_heads_for_the_frontier(u_graph) -> None:  # noqa: ANN001
-    from agents.greedy import CentralizedGreedyPolicy, GreedyPolicy
+    from marl_cover.agents.baselines.greedy import CentralizedGreedyPolicy, GreedyPolicy
 
     env, observations = explore(u_graph, [0], [], sensor_range=12.0, hops=8)
     assert GreedyPolicy(8).act(observations) == {"robot_0": 1}  # east, toward frontier 3
@@ -251,7 +222,7 @@ def test_fair_expert_ignores_what_is_not_discovered(u_graph) -> None:  # noqa: A
     """The fair expert acts the same whatever lies in the unknown; the omniscient one goes for
     an undiscovered point of interest."""
     pytest.importorskip("pyvrp")
-    from agents.experts import RoutingExpert
+    from marl_cover.agents.experts import RoutingExpert
 
     def first_actions(interest: list[int], information: str, robot: int) -> list[int]:
         env, _ = explore(u_graph, [robot], interest, sensor_range=6.0, hops=8, max_steps=6)
@@ -277,8 +248,8 @@ def test_omniscient_expert_plays_the_same_episode_in_both_tasks() -> None:
     """The expert ignores discovery and the environment draws the same episodes, so a
     coverage dataset of the omniscient expert is its exploration dataset."""
     pytest.importorskip("pyvrp")
-    from agents.datasets import record_episode
-    from agents.experts import RoutingExpert
+    from marl_cover.agents.experts import RoutingExpert
+    from marl_cover.agents.training.datasets import record_episode
 
     config = {"map": "city", "city_size": 90, "hops": 5, "max_steps": 15}
     episodes = [
@@ -297,7 +268,7 @@ def test_expected_expert_values_the_unknown_by_the_share_of_points_seen(u_graph)
     each undiscovered waypoint the share of points of interest among the discovered ones; it
     heads for the larger unknown, where the omniscient expert heads for the hidden point."""
     pytest.importorskip("pyvrp")
-    from agents.experts import RoutingExpert, build_problem
+    from marl_cover.agents.experts import RoutingExpert, build_problem
 
     # robot on 2 with a 6 m sensor: knows 1, 2, 3, of which 2 (visited at the start) is a
     # point: share 1/3; 0 (west) is the one point left
@@ -318,7 +289,7 @@ def test_expected_expert_values_the_unknown_by_the_share_of_points_seen(u_graph)
 
 def test_local_expert_sees_the_known_ball_and_the_frontier(u_graph) -> None:  # noqa: ANN001
     pytest.importorskip("pyvrp")
-    from agents.experts import LocalRoutingExpert
+    from marl_cover.agents.experts import LocalRoutingExpert
 
     # robot on 2 with a 6 m sensor knows 1, 2, 3; the hidden point 0 is no prize, the
     # frontier 1 and 3 (next to 0 and 4) are
@@ -331,7 +302,7 @@ def test_local_expert_sees_the_known_ball_and_the_frontier(u_graph) -> None:  # 
 
 def test_points_worth_nothing_are_no_candidates(path_graph) -> None:  # noqa: ANN001
     pytest.importorskip("pyvrp")
-    from agents.experts import build_problem
+    from marl_cover.agents.experts import build_problem
 
     env = marl_cover.parallel_env(graph=path_graph, num_robots=1, hops=7, max_steps=8)
     env.reset(seed=0, options={"robot_nodes": [0], "interest_nodes": [2, 4, 6]})

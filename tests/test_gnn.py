@@ -11,13 +11,13 @@ import marl_cover
 
 torch = pytest.importorskip("torch")
 
-from agents.models import (  # noqa: E402
+from marl_cover.agents.models import (  # noqa: E402
     AggregationGNN,
     GNNConfig,
     centralized_logits,
     decentralized_logits,
 )
-from agents.models.policy import load_model, save_model  # noqa: E402
+from marl_cover.agents.models.checkpoints import load_model, save_model  # noqa: E402
 
 
 def tensors(arrays: dict[str, np.ndarray]) -> dict[str, torch.Tensor]:
@@ -267,43 +267,6 @@ def test_deeper_copy_keeps_the_logits_and_trains_the_far_hops(config) -> None:
         near.deeper_copy(3)
 
 
-@pytest.mark.parametrize(
-    "config",
-    [
-        GNNConfig(kind="linear", hops=4, hidden=6),
-        GNNConfig(kind="nonlinear", hops=4, hidden=6),
-        GNNConfig(kind="nonlinear", hops=3, hidden=5, residual=True, per_hop=True, time_horizon=50),
-    ],
-    ids=str,
-)
-def test_merged_models_give_the_mean_of_their_logits_in_one_pass(config) -> None:
-    torch.manual_seed(8)
-    members = [AggregationGNN(config).double() for _ in range(3)]
-    merged = AggregationGNN.merged(members)
-    assert merged.config == replace(config, hidden=3 * config.hidden)
-    nodes, edge_index, edge_attr = state_graph(num_robots=3, hops=4, city_size=90, seed=5)
-    if config.time_horizon is not None:
-        nodes = torch.cat([nodes, torch.full_like(nodes[:, :1], 0.5)], dim=1)
-    graph = (nodes, edge_index, edge_attr)
-    mean = torch.stack([member(*graph) for member in members]).mean(dim=0)
-    torch.testing.assert_close(merged(*graph), mean, atol=1e-12, rtol=0)
-    torch.testing.assert_close(merged.reference_forward(*graph), mean, atol=1e-12, rtol=0)
-    # member 1 of the edge MLP's first layer reads its own units of [e, h_receiver, h_sender]
-    if config.kind == "nonlinear" and not config.per_hop:
-        h = config.hidden
-        block = merged.edge_block[0].weight[h : 2 * h].view(h, 3, 3, h)  # (out, part, member, in)
-        assert torch.equal(block[:, :, 1], members[1].edge_block[0].weight.view(h, 3, h))
-        assert torch.all(block[:, :, [0, 2]] == 0)
-    # one member: the same network
-    torch.testing.assert_close(AggregationGNN.merged(members[:1])(*graph), members[0](*graph))
-    with pytest.raises(ValueError, match="member 1 is a"):
-        AggregationGNN.merged([members[0], AggregationGNN(replace(config, hops=2)).double()])
-    with pytest.raises(ValueError, match="norm"):
-        AggregationGNN.merged([AggregationGNN(GNNConfig(hops=2, norm=True))] * 2)
-    with pytest.raises(ValueError, match="at least one"):
-        AggregationGNN.merged([])
-
-
 def test_grown_to_widens_and_splits_the_hops_or_says_why_not() -> None:
     torch.manual_seed(5)
     shared = AggregationGNN(GNNConfig(hops=3, hidden=8)).double()
@@ -369,7 +332,7 @@ def test_fast_forward_and_its_gradients_equal_the_plain_formula(config: GNNConfi
 
 
 def test_the_receptive_field_of_an_output_edge_on_a_path() -> None:
-    from agents.models.gnn import receptive_field
+    from marl_cover.agents.models.aggregation import receptive_field
 
     # 0 - 1 - 2 - 3 - 4 - 5, both ways; the output is edge 1 (1 -> 0)
     pairs = [(0, 1), (1, 0), (1, 2), (2, 1), (2, 3), (3, 2), (3, 4), (4, 3), (4, 5), (5, 4)]
@@ -389,7 +352,7 @@ def test_the_receptive_field_of_an_output_edge_on_a_path() -> None:
 @pytest.mark.parametrize("seed", range(4))
 def test_compiled_and_torch_receptive_field_distances_agree(seed: int) -> None:
     pytest.importorskip("numba")
-    from agents.models.gnn import output_distances
+    from marl_cover.agents.models.aggregation import output_distances
 
     generator = torch.Generator().manual_seed(seed)
     num_nodes, num_edges = 60, 150  # directed, with repeats, self-loops and isolated nodes
@@ -484,7 +447,6 @@ def test_a_stay_offset_moves_the_stay_logits_only_and_survives_growth(tmp_path) 
         offset.per_hop_copy(),
         offset.wider_copy(12),
         offset.deeper_copy(4),
-        AggregationGNN.merged([offset, offset]),
     ):
         assert copy.stay_logit is not None and copy.stay_logit.item() == -1.25
     saved = tmp_path / "offset.pt"
@@ -498,7 +460,8 @@ def test_a_stay_offset_moves_the_stay_logits_only_and_survives_growth(tmp_path) 
 
 
 def test_the_diffusion_backward_equals_torch_s_own_bit_for_bit() -> None:
-    from agents.models.gnn import _Diffusion, mean_operator
+    from marl_cover.agents.models.aggregation import mean_operator
+    from marl_cover.agents.models.gnn import _Diffusion
 
     generator = torch.Generator().manual_seed(0)
     num_nodes = 50  # directed edges, self-loops and isolated nodes; no repeated edge

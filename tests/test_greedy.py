@@ -7,10 +7,9 @@ import pytest
 from helpers import random_grid_graph
 
 import marl_cover
-from agents.greedy import (
+from marl_cover.agents.baselines.greedy import (
     CentralizedGreedyPolicy,
     GreedyPolicy,
-    counterfactual_returns,
     greedy_return,
 )
 
@@ -98,74 +97,6 @@ def test_greedy_return_names_an_exploration_environment() -> None:
     env.reset(seed=0)
     with pytest.raises(ValueError, match="plays coverage environments, not 'exploration'"):
         greedy_return(env, 3)
-
-
-@pytest.mark.parametrize("compiled", [True, False])
-def test_counterfactual_returns_on_a_path(path_graph, compiled: bool) -> None:
-    """Robot at 3, points at 1, 5 and 6, three steps: east first reaches 5 and 6 (2); west
-    reaches 1 only, and staying (or a masked north/south, the same no-op) lets greedy break
-    the tie between 1 and 5 eastward, which reaches 5 only (1)."""
-    if compiled:
-        pytest.importorskip("numba")
-    env = marl_cover.parallel_env(graph=path_graph, num_robots=1, hops=7, max_steps=3)
-    env.reset(seed=0, options={"robot_nodes": [3], "interest_nodes": [1, 5, 6]})
-    for joint in ([STAY], [WEST]):  # the robot's own entry in the joint action does not matter
-        returns = counterfactual_returns(env, 7, np.array(joint), compiled=compiled)
-        assert returns.tolist() == [[1.0, 2.0, 1.0, 1.0, 1.0]]
-    assert env.snapshot().num_steps == 0  # left alone
-
-
-@pytest.mark.parametrize("compiled", [True, False])
-def test_counterfactual_returns_hold_the_teammates_moves(path_graph, compiled: bool) -> None:
-    """Two robots on the path: robot 1's move is kept while robot 0's varies, and the reverse."""
-    if compiled:
-        pytest.importorskip("numba")
-    env = marl_cover.parallel_env(graph=path_graph, num_robots=2, hops=7, max_steps=1)
-    env.reset(seed=0, options={"robot_nodes": [2, 5], "interest_nodes": [1, 3, 4, 6]})
-    returns = counterfactual_returns(env, 7, np.array([EAST, WEST]), compiled=compiled)
-    # one step: robot 0 reaches 3 (east) or 1 (west); robot 1 reaches 4 (west) or 6 (east)
-    assert returns.tolist() == [[1.0, 2.0, 1.0, 2.0, 1.0], [1.0, 2.0, 1.0, 2.0, 1.0]]
-    returns = counterfactual_returns(env, 7, np.array([STAY, STAY]), compiled=compiled)
-    assert returns.tolist() == [[0.0, 1.0, 0.0, 1.0, 0.0], [0.0, 1.0, 0.0, 1.0, 0.0]]
-
-
-def test_counterfactual_returns_are_greedy_returns_of_each_deviation() -> None:
-    """On crowded random grids, entry ``[i, m]`` is greedy's return after the joint action with
-    robot ``i`` on ``m``, in the kernel and in the reference alike."""
-    pytest.importorskip("numba")
-    rng = np.random.default_rng(3)
-    for seed in range(6):
-        graph = random_grid_graph(rng, 7, 7, density=0.7)
-        num_robots = int(rng.integers(2, 6))
-        env = marl_cover.parallel_env(
-            graph=graph, num_robots=num_robots, hops=5, max_steps=12, interest_fraction=0.5
-        )
-        env.reset(seed=seed)
-        env.apply_actions(rng.integers(0, 5, size=num_robots))
-        joint = rng.integers(0, 5, size=num_robots)
-        compiled = counterfactual_returns(env, 5, joint, compiled=True)
-        np.testing.assert_array_equal(
-            compiled, counterfactual_returns(env, 5, joint, compiled=False)
-        )
-        for i in range(num_robots):
-            for move in range(5):
-                first = joint.copy()
-                first[i] = move
-                assert compiled[i, move] == greedy_return(env, 5, first), (seed, i, move)
-
-
-def test_counterfactual_returns_name_bad_input(path_graph) -> None:
-    env = marl_cover.parallel_env(graph=path_graph, num_robots=2, hops=3, max_steps=2)
-    env.reset(seed=0)
-    with pytest.raises(ValueError, match=r"one action per robot \(2\), got \(3,\)"):
-        counterfactual_returns(env, 3, np.zeros(3, dtype=np.int64))
-    while env.agents:
-        env.apply_actions(np.zeros(2, dtype=np.int64))
-    assert counterfactual_returns(env, 3, np.zeros(2, dtype=np.int64)).tolist() == [[0.0] * 5] * 2
-    exploration = marl_cover.parallel_env(task="exploration", num_robots=2, hops=3, city_size=200)
-    exploration.reset(seed=0)
-    with pytest.raises(ValueError, match="counterfactual_returns plays coverage environments"):
-        counterfactual_returns(exploration, 3, np.zeros(2, dtype=np.int64))
 
 
 def greedy_returns(seeds, **config) -> list[float]:

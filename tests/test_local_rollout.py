@@ -1,5 +1,5 @@
-"""The decentralized rollout (``agents.local_rollout``): the world a robot builds from its
-ego-graph, and exact choices of the policy on hand-built graphs."""
+"""The decentralized rollout (``marl_cover.agents.planners.local_rollout``): the world a robot
+builds from its ego-graph, and exact choices of the policy on hand-built graphs."""
 
 from __future__ import annotations
 
@@ -11,14 +11,9 @@ import pytest
 torch = pytest.importorskip("torch")
 
 import marl_cover  # noqa: E402
-from agents.local_rollout import (  # noqa: E402
-    LocalRolloutPolicy,
-    TrueMapRolloutPolicy,
-    ego_world,
-    true_map_world,
-)
-from agents.models import AggregationGNN, GNNConfig  # noqa: E402
-from agents.models.policy import GNNPolicy  # noqa: E402
+from marl_cover.agents.models import AggregationGNN, GNNConfig  # noqa: E402
+from marl_cover.agents.models.policy import GNNPolicy  # noqa: E402
+from marl_cover.agents.planners.local_rollout import LocalRolloutPolicy, ego_world  # noqa: E402
 from marl_cover.graph import SpatialGraph  # noqa: E402
 
 STAY, EAST, NORTH, WEST, SOUTH = range(5)
@@ -123,17 +118,14 @@ def test_the_world_holds_exactly_what_the_robot_sees() -> None:
     )
 
 
-def test_frontier_counts_as_interest_in_exploration() -> None:
-    """A 6 x 1 corridor, sensor 5 m: from waypoint 0 the team knows 0 and 1, and 1 is the
-    frontier; the world gives it a point when told to."""
+def test_in_exploration_the_world_is_what_the_team_discovered() -> None:
+    """A 6 x 1 corridor, sensor 5 m: from waypoint 0 the team knows 0 and 1, and the point of
+    interest on 4 is undiscovered: the world holds two waypoints and no point."""
     graph = lattice(6, 1)
     env = marl_cover.parallel_env(
         graph=graph, num_robots=1, hops=5, task="exploration", sensor_range=5.0
     )
     observations, _ = env.reset(seed=0, options={"robot_nodes": [0], "interest_nodes": [4]})
-    world = ego_world(observations["robot_0"], hops=5, frontier_as_interest=True).snapshot()
-    assert world.graph.num_nodes == 2
-    assert world.unvisited_interest.tolist() == [False, True]
     plain = ego_world(observations["robot_0"], hops=5).snapshot()
     assert plain.graph.num_nodes == 2 and not plain.unvisited_interest.any()
 
@@ -205,96 +197,6 @@ def test_greedy_finishes_the_play_outs(interest: list[int], chosen: int, greedy_
         FixedLogits([[0.0] * 5], greedy_after=-1)
 
 
-class FixedTrueMap(FixedLogits, TrueMapRolloutPolicy):
-    """:class:`FixedLogits` on the true map's worlds (its K = 4 covers the corridor below)."""
-
-
-def test_the_true_map_world_holds_what_the_team_has_not_seen() -> None:
-    """The 7-waypoint corridor in exploration, sensor 5 m, robot_0 on 3: the team knows 2, 3
-    and 4, the points on 0 and 1 are undiscovered. The robot's view holds no point, so both
-    moves return 0 there and the argmax (east) stays; on the true map west returns 2 (0, 1
-    under "west") and the oracle takes it. With only the known points on the true layout
-    (``hidden="none"``) nothing is in reach; with every undiscovered waypoint a point
-    (``hidden="all"``) 0, 1, 5 and 6 are."""
-    graph = lattice(7, 1)
-    env = marl_cover.parallel_env(
-        graph=graph, num_robots=1, hops=6, max_steps=4, task="exploration", sensor_range=5.0
-    )
-    observations, _ = env.reset(seed=0, options={"robot_nodes": [3], "interest_nodes": [0, 1]})
-    seen = ego_world(observations["robot_0"], hops=6).snapshot()
-    assert seen.graph.num_nodes == 3 and not seen.unvisited_interest.any()
-    world = true_map_world(env.snapshot(), robot=0, hops=6).snapshot()
-    assert world.graph.num_nodes == 7 and world.robot_node.tolist() == [3]
-    assert np.flatnonzero(world.unvisited_interest).tolist() == [0, 1]
-    assert world.max_steps == 4 and world.discovered.all()  # a coverage world
-    assert true_map_world(env.snapshot(), robot=0, hops=2, horizon=3).snapshot().max_steps == 3
-    layout = true_map_world(env.snapshot(), robot=0, hops=6, hidden="none").snapshot()
-    assert layout.graph.num_nodes == 7 and not layout.unvisited_interest.any()
-    hopeful = true_map_world(env.snapshot(), robot=0, hops=6, hidden="all").snapshot()
-    assert np.flatnonzero(hopeful.unvisited_interest).tolist() == [0, 1, 5, 6]
-    with pytest.raises(ValueError, match=r"hidden must be one of \['true', 'none', 'all'\]"):
-        true_map_world(env.snapshot(), robot=0, hops=6, hidden="some")
-    near = true_map_world(env.snapshot(), robot=0, hops=2).snapshot()  # waypoints 1..5
-    assert near.graph.num_nodes == 5 and near.robot_node.tolist() == [2]
-    assert np.flatnonzero(near.unvisited_interest).tolist() == [0]  # the point on 1
-
-    east_best = [[0.0, 1.0, -np.inf, 0.8, -np.inf]]
-    local = FixedLogits(east_best, margin=0.5, base=always(WEST))
-    assert local.act(observations) == {"robot_0": EAST}
-    assert local.counts == {"decisions": 1, "played": 1, "play_outs": 2}
-    oracle = FixedTrueMap(east_best, margin=0.5, base=always(WEST))
-    assert oracle.act_env(env) == {"robot_0": WEST}
-    assert oracle.counts == {"decisions": 1, "played": 1, "play_outs": 2, "changed": 1}
-    blind = FixedTrueMap(east_best, hidden="none", margin=0.5, base=always(WEST))
-    assert blind.act_env(env) == {"robot_0": EAST}  # the layout alone holds no point
-    hopeful = FixedTrueMap(east_best, hidden="all", margin=0.5, base=always(WEST))
-    # Every undiscovered waypoint hoped for: west then west reaches 1 and 0 (2), east then
-    # west only 1 (1), as on the true map.
-    assert hopeful.act_env(env) == {"robot_0": WEST}
-    with pytest.raises(ValueError, match=r"hidden must be one of .*got 'some'"):
-        FixedTrueMap(east_best, hidden="some")
-    # With no point anywhere the true map has nothing to turn for; the hope still turns west.
-    env.reset(seed=0, options={"robot_nodes": [3], "interest_nodes": []})
-    assert FixedTrueMap(east_best, margin=0.5, base=always(WEST)).act_env(env) == {"robot_0": EAST}
-    assert hopeful.act_env(env) == {"robot_0": WEST}
-    with pytest.raises(RuntimeError, match="plays through act_env"):
-        oracle.act(observations)
-    with pytest.raises(ValueError, match="frontier_as_interest does not apply"):
-        FixedTrueMap(east_best, frontier_as_interest=True)
-
-
-def test_in_coverage_the_true_map_oracle_plays_the_local_rollout() -> None:
-    """In coverage a robot's view is the true map within its hops: the two worlds are the
-    same environment, and the oracle's episode is the local rollout's, move for move."""
-    graph = lattice(6, 5, holes=((2, 2), (3, 1)))
-    torch.manual_seed(3)
-    model = AggregationGNN(GNNConfig(kind="nonlinear", hops=3))
-    env = marl_cover.parallel_env(graph=graph, num_robots=3, hops=3, max_steps=8)
-    twin = marl_cover.parallel_env(graph=graph, num_robots=3, hops=3, max_steps=8)
-    observations, _ = env.reset(seed=4)
-    twin.reset(seed=4)
-    local = LocalRolloutPolicy(model, margin=100.0)
-    oracle = TrueMapRolloutPolicy(model, margin=100.0)
-    for agent in env.possible_agents:
-        robot = env.possible_agents.index(agent)
-        mine = ego_world(observations[agent], hops=3).state()
-        truth = true_map_world(env.snapshot(), robot, hops=3).state()
-        assert mine.keys() == truth.keys()
-        for key in mine.keys() - {"node_pos"}:
-            np.testing.assert_array_equal(mine[key], truth[key], err_msg=f"{agent} {key}")
-        # positions: the ego-graph's are relative to the robot, the map's are not
-        on = mine["node_mask"]
-        np.testing.assert_array_equal(
-            mine["node_pos"][on] - mine["node_pos"][0], truth["node_pos"][on] - truth["node_pos"][0]
-        )
-    while env.agents:
-        actions = local.act(observations)
-        assert oracle.act_env(twin) == actions
-        observations, *_ = env.step(actions)
-        twin.step(actions)
-    assert local.counts == oracle.counts and local.counts["played"] > 0
-
-
 def test_margin_zero_is_the_gnn_and_bad_settings_are_named() -> None:
     graph = lattice(4, 3)
     torch.manual_seed(0)
@@ -327,112 +229,32 @@ def test_margin_zero_is_the_gnn_and_bad_settings_are_named() -> None:
 def test_cli_plays_the_decentralized_rollout(tmp_path) -> None:
     """``evaluate.py policy=gnn_local_rollout``: margin 0 plays the GNN's episodes; a wide
     margin plays moves out, and the counts say how many, in coverage and in exploration."""
-    from helpers import run_script
+    from helpers import run_cli
 
-    from agents.models.policy import save_model
+    from marl_cover.agents.models.checkpoints import save_model
 
     torch.manual_seed(2)
     model_file = tmp_path / "m.pt"
     save_model(model_file, AggregationGNN(GNNConfig(kind="nonlinear", hops=3)), {"note": "random"})
-    common = [f"checkpoint={model_file}", "episodes=2", "num_robots=3", "max_steps=8"]
-    common += ["city_size=80"]
+    common = [f"model={model_file}", "episodes=2", "env.num_robots=3", "env.max_steps=8"]
+    common += ["env.city_size=80"]
     records = {}
     for name, extra in (
         ("gnn", ["policy=gnn"]),
         ("zero", ["policy=gnn_local_rollout", "gnn.margin=0"]),
         ("wide", ["policy=gnn_local_rollout", "gnn.margin=100", "gnn.horizon=4"]),
         ("finish", ["policy=gnn_local_rollout", "gnn.margin=100", "gnn.greedy_after=1"]),
-        ("explore", ["policy=gnn_local_rollout", "task=exploration", "gnn.margin=100"]),
-        (
-            "frontier",
-            [
-                "policy=gnn_local_rollout",
-                "task=exploration",
-                "gnn.margin=100",
-                "gnn.frontier_as_interest=true",
-            ],
-        ),
-        (
-            "oracle",
-            ["policy=gnn_local_rollout", "gnn.margin=100", "gnn.horizon=4", "gnn.world=true_map"],
-        ),
-        (
-            "explore_oracle",
-            [
-                "policy=gnn_local_rollout",
-                "task=exploration",
-                "gnn.margin=100",
-                "gnn.world=true_map",
-            ],
-        ),
-        (
-            "explore_layout",
-            [
-                "policy=gnn_local_rollout",
-                "task=exploration",
-                "gnn.margin=100",
-                "gnn.world=true_layout",
-            ],
-        ),
-        (
-            "explore_optimistic",
-            [
-                "policy=gnn_local_rollout",
-                "task=exploration",
-                "gnn.margin=100",
-                "gnn.world=optimistic_layout",
-            ],
-        ),
+        ("explore", ["policy=gnn_local_rollout", "env.task=exploration", "gnn.margin=100"]),
     ):
         out = tmp_path / f"{name}.json"
-        result = run_script("evaluate.py", *common, *extra, f"out={out}")
+        result = run_cli("evaluate", *common, *extra, f"out={out}")
         assert result.returncode == 0, result.stderr
         records[name] = json.loads(out.read_text())["summary"]
     rewards = {k: [r["reward"] for r in v["results"]] for k, v in records.items()}
     assert rewards["zero"] == rewards["gnn"]
     assert records["zero"]["policy_counts"]["decisions"] == 2 * 8 * 3
     assert "played" not in records["zero"]["policy_counts"]
-    assert rewards["oracle"] == rewards["wide"]  # coverage: the view is the true map
-    assert records["oracle"]["policy_counts"] == records["wide"]["policy_counts"]
-    for name in (
-        "wide",
-        "finish",
-        "explore",
-        "frontier",
-        "explore_oracle",
-        "explore_layout",
-        "explore_optimistic",
-    ):
+    for name in ("wide", "finish", "explore"):
         counts = records[name]["policy_counts"]
         assert counts["decisions"] == 2 * 8 * 3 and 0 < counts["played"] <= counts["decisions"]
         assert 2 * counts["played"] <= counts["play_outs"] <= 5 * counts["played"]
-
-
-def test_local_labels_are_the_policys_moves_on_the_learners_states() -> None:
-    """``labels=local``: each state of the learner's own episode is labelled with the moves
-    the decentralized rollout makes from the robots' observations there, and each label is
-    among its accepted moves."""
-    from agents.rollout import GNNArgmax
-    from agents.rollout_labels import record_rollout_episode
-
-    torch.manual_seed(5)
-    model = AggregationGNN(GNNConfig(kind="nonlinear", hops=3)).double()
-    env = marl_cover.parallel_env(num_robots=3, hops=3, max_steps=6, city_size=60)
-    labeller = LocalRolloutPolicy(model, margin=100.0)
-    episode, counts = record_rollout_episode(env, GNNArgmax(model), labeller, seed=3)
-    own_episode, _ = record_rollout_episode(env, GNNArgmax(model), None, seed=3)
-    np.testing.assert_array_equal(episode.robot_node, own_episode.robot_node)  # learner's states
-    env.reset(seed=3)
-    check = LocalRolloutPolicy(model, margin=100.0)
-    changed = stays = 0
-    for step in range(episode.num_steps):
-        label = np.array(list(check.act(env.observations()).values()))
-        np.testing.assert_array_equal(episode.actions[step], label)
-        accept = episode.accept[step].astype(np.int64)
-        assert ((accept >> label) & 1).all()
-        own = own_episode.actions[step]
-        changed += int((label != own).sum())
-        stays += int(((label != own) & (label == 0)).sum())
-        env.apply_actions(own)
-    assert counts["changed"] == changed > 0
-    assert counts["changed_to_stay"] == stays

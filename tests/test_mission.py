@@ -7,11 +7,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import run_script
+from helpers import run_cli
 
-from agents.experts.expert import RoutingExpert
-from agents.greedy import CentralizedGreedyPolicy, GreedyPolicy
-from agents.mission import MissionConfig, MissionExpert, make_mission_policy, run_mission
+from marl_cover.agents.baselines.greedy import CentralizedGreedyPolicy, GreedyPolicy
+from marl_cover.agents.experts.expert import RoutingExpert
+from marl_cover.agents.mission.flight import (
+    MissionConfig,
+    MissionExpert,
+    make_mission_policy,
+    run_mission,
+)
 from marl_cover.continuous import QuadrotorCoverageEnv
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -88,11 +93,11 @@ GOLDEN = {"arrival": (23, 266, 6, 12, 20, 0), "rate": (23, 600, 7, 14, 21, 0)}
 def test_mission_config_rejects_unknown_methods_and_keys() -> None:
     with pytest.raises(ValueError, match="unknown mission method.*'gnn2'"):
         MissionConfig(methods=["gnn2"])
-    from agents.configuration import load
+    from marl_cover.agents.cli.options import load
 
-    with pytest.raises(ValueError, match="unknown key.*'speed'"):
+    with pytest.raises(ValueError, match="Key 'speed' not in"):
         load(MissionConfig, None, ["dynamics.quadrotor.speed=3"])
-    config = load(MissionConfig, ROOT / "configs/mission.yaml", ["dynamics.retarget=rate"])
+    config = load(MissionConfig, "mission", ["dynamics.retarget=rate"])
     assert config.dynamics.retarget == "rate" and config.dynamics.quadrotor.mass == 0.71
     assert isinstance(make_mission_policy("greedy", config), GreedyPolicy)
     assert load(MissionConfig, None, ["animate_seed=null"]).animate_seed is None
@@ -101,15 +106,15 @@ def test_mission_config_rejects_unknown_methods_and_keys() -> None:
             load(MissionConfig, None, [f"{key}={value}"])
     with pytest.raises(ValueError, match="frame_every must be > 0"):
         MissionConfig(frame_every=0.0)
-    with pytest.raises(FileNotFoundError, match=r"no model file at nowhere.pt \(checkpoint\)"):
-        load(MissionConfig, None, ["checkpoint=nowhere.pt"])
-    assert load(MissionConfig, None, ["checkpoint=nowhere.pt", "methods=[greedy]"]).methods == [
+    with pytest.raises(ValueError, match=r"no model file at nowhere.pt and no shipped model"):
+        load(MissionConfig, None, ["model=nowhere.pt"])
+    assert load(MissionConfig, None, ["model=nowhere.pt", "methods=[greedy]"]).methods == [
         "greedy"
     ]  # a model file only matters to the GNN
     for bad in (["gnn_spread=-0.5"], ["gnn_spread=0.5", "gnn_centralized=true"]):
         with pytest.raises(ValueError, match="gnn_spread must be >= 0 and needs gnn_central"):
             load(MissionConfig, None, bad)
-    spread = load(MissionConfig, ROOT / "configs/mission.yaml", ["gnn_spread=0.5"])
+    spread = load(MissionConfig, "mission", ["gnn_spread=0.5"])
     assert make_mission_policy("gnn", spread).spread_margin == 0.5
     assert spread.setup("gnn")["gnn_spread"] == 0.5  # a resumed run tells the decoding apart
     assert "gnn_spread" not in config.setup("gnn")  # setups recorded before it still match
@@ -122,7 +127,7 @@ def test_mission_config_rejects_unknown_methods_and_keys() -> None:
     ):
         with pytest.raises(ValueError, match="gnn_rollout must be >= 0 with gnn_rollout_hor"):
             load(MissionConfig, None, bad)
-    planned = load(MissionConfig, ROOT / "configs/mission.yaml", ["gnn_rollout=1.5"])
+    planned = load(MissionConfig, "mission", ["gnn_rollout=1.5"])
     policy = make_mission_policy("gnn", planned)
     assert (policy.margin, policy.horizon) == (1.5, 20)
     assert planned.setup("gnn")["gnn_rollout"] == 1.5
@@ -139,17 +144,17 @@ def test_ego_graphs_span_the_gnn_receptive_field(tmp_path: Path) -> None:
     greedy flies the same mission on them (it counts only the points within its ``hops``)."""
     import torch
 
-    from agents.models.gnn import AggregationGNN, GNNConfig
-    from agents.models.policy import save_model
+    from marl_cover.agents.models.checkpoints import save_model
+    from marl_cover.agents.models.gnn import AggregationGNN, GNNConfig
 
     torch.manual_seed(0)
     path = tmp_path / "far.pt"
     save_model(path, AggregationGNN(GNNConfig(hops=9, hidden=4)), {})
-    config = MissionConfig(hops=6, checkpoint=str(path), methods=["greedy", "gnn"])
+    config = MissionConfig(hops=6, model=str(path), methods=["greedy", "gnn"])
     assert config.observation_hops() == 9
-    assert MissionConfig(hops=6, checkpoint=str(path), methods=["greedy"]).observation_hops() == 6
-    assert MissionConfig(hops=6, checkpoint=str(path), gnn_centralized=True).observation_hops() == 6
-    assert MissionConfig(hops=12, checkpoint=str(path)).observation_hops() == 12
+    assert MissionConfig(hops=6, model=str(path), methods=["greedy"]).observation_hops() == 6
+    assert MissionConfig(hops=6, model=str(path), gnn_centralized=True).observation_hops() == 6
+    assert MissionConfig(hops=12, model=str(path)).observation_hops() == 12
     near = run_mission(small_env(), GreedyPolicy(6, fallback="stay"), seed=2)
     wide = QuadrotorCoverageEnv(dynamics={"max_time": 60.0}, **{**SMALL, "hops": 9})
     far = run_mission(wide, GreedyPolicy(6, fallback="stay"), seed=2)
@@ -168,7 +173,7 @@ def test_run_mission_script(tmp_path: Path) -> None:
         f"out={out}",
         "frame_every=3.0",
     ]
-    done = run_script("run_mission.py", *args)
+    done = run_cli("mission", *args)
     assert done.returncode == 0, done.stderr[-2000:]
     summary = json.loads((out / "mission.json").read_text())
     assert set(summary["methods"]) == {"greedy", "gnn"} and summary["seeds"] == [0, 1]
@@ -177,18 +182,19 @@ def test_run_mission_script(tmp_path: Path) -> None:
     assert (out / "mission.png").stat().st_size > 0
     assert (out / "mission_gnn.gif").read_bytes()[:3] == b"GIF"
     # A second run reads the missions back instead of flying them again.
-    again = run_script("run_mission.py", *args)
+    again = run_cli("mission", *args)
     assert again.returncode == 0 and "seed" not in again.stdout.split("points of interest")[0]
     # Another model under the same out= folder is an error that names the run and the change.
-    other = args + ["checkpoint=agents/models/shipped/bc/coverage_gnn.pt"]
-    refused = run_script("run_mission.py", *other)
+    other = args + ["model=gnn_mappo"]
+    refused = run_cli("mission", *other)
     assert refused.returncode != 0 and "Traceback" not in refused.stderr
     assert "gnn_0.json was made under another setup" in refused.stderr
     assert "model_sha256" in refused.stderr
     # A bad override ends the script with one line naming it, before anything flies.
-    bad = run_script("run_mission.py", *args, "seeds=ten")
+    bad = run_cli("mission", *args, "seeds=ten")
     assert bad.returncode != 0 and "Traceback" not in bad.stderr
-    assert bad.stderr.strip().endswith("MissionConfig.seeds must be an integer, got 'ten' (str)")
+    assert "Value 'ten' of type 'str' could not be converted to Integer" in bad.stderr
+    assert bad.stderr.strip().endswith("(full_key: seeds)")
 
 
 def test_bench_mission_reports_each_flight(tmp_path: Path) -> None:
@@ -196,8 +202,12 @@ def test_bench_mission_reports_each_flight(tmp_path: Path) -> None:
     wall seconds, and the slowest per method; the missions are those of ``run_mission``."""
     out = tmp_path / "bench.json"
     args = ["map=city", "num_robots=3", "dynamics.max_time=20"]
-    done = run_script(
-        "bench_mission.py", "--methods", "greedy", "--seeds", "0", "1", "--out", str(out), *args
+    done = run_cli(
+        "bench-mission",
+        "methods=[greedy]",
+        "seeds=[0,1]",
+        f"out={out}",
+        *(f"mission.{arg}" for arg in args),
     )
     assert done.returncode == 0, done.stderr
     report = json.loads(out.read_text())
@@ -209,9 +219,9 @@ def test_bench_mission_reports_each_flight(tmp_path: Path) -> None:
         )
         assert 0 < row["policy_seconds"] < row["wall_seconds"]
     assert report["min_real_time_factor"] == {"greedy": min(r["real_time_factor"] for r in rows)}
-    from agents.configuration import load
+    from marl_cover.agents.cli.options import load
 
-    config = load(MissionConfig, ROOT / "configs/mission.yaml", args)
+    config = load(MissionConfig, "mission", args)
     flown = run_mission(config.make_env(), make_mission_policy("greedy", config), 1)
     assert (flown.mission_seconds, flown.decisions) == (
         rows[1]["mission_seconds"],
@@ -225,9 +235,9 @@ def test_the_decentralized_rollout_flies_the_mission() -> None:
     clock) and changes some of them."""
     import torch
 
-    from agents.local_rollout import LocalRolloutPolicy
-    from agents.models.gnn import AggregationGNN, GNNConfig
-    from agents.models.policy import GNNPolicy
+    from marl_cover.agents.models.gnn import AggregationGNN, GNNConfig
+    from marl_cover.agents.models.policy import GNNPolicy
+    from marl_cover.agents.planners.local_rollout import LocalRolloutPolicy
 
     torch.manual_seed(0)
     model = AggregationGNN(GNNConfig(hops=6, hidden=8))

@@ -1,4 +1,5 @@
-"""The spread tie-break (``agents.spread``): exact choices on a hand-built U-shaped graph."""
+"""The spread tie-break (``marl_cover.agents.baselines.spread``): exact choices on a hand-built
+U-shaped graph."""
 
 from __future__ import annotations
 
@@ -6,7 +7,7 @@ import numpy as np
 import pytest
 
 import marl_cover
-from agents.spread import spread_actions, teammate_distances
+from marl_cover.agents.baselines.spread import spread_actions, teammate_distances
 from marl_cover.graph import SpatialGraph
 
 STAY, EAST, NORTH, WEST, SOUTH = range(5)
@@ -74,8 +75,8 @@ def test_near_ties_go_away_from_the_teammate_by_hops_not_metres(u_graph) -> None
 
 def test_the_gnn_policy_breaks_its_own_ties(u_graph) -> None:  # noqa: ANN001
     torch = pytest.importorskip("torch")
-    from agents.models import AggregationGNN, GNNConfig
-    from agents.models.policy import EnsemblePolicy, GNNPolicy
+    from marl_cover.agents.models import AggregationGNN, GNNConfig
+    from marl_cover.agents.models.policy import GNNPolicy
 
     torch.manual_seed(0)
     model = AggregationGNN(GNNConfig(kind="nonlinear", hops=4))
@@ -85,8 +86,6 @@ def test_the_gnn_policy_breaks_its_own_ties(u_graph) -> None:  # noqa: ANN001
     logits = policy.logits(observations).numpy()
     expected = spread_actions(logits, list(observations.values()), margin=1e9)
     assert list(policy.act(observations).values()) == expected.tolist() == [WEST, WEST]
-    ensemble = EnsemblePolicy([model, model], spread_margin=1e9)  # reads the pooled logits
-    assert list(ensemble.act(observations).values()) == [WEST, WEST]
     plain = GNNPolicy(model).act(observations)
     assert list(plain.values()) == logits.argmax(-1).tolist()
     for kwargs in ({"centralized": True}, {"deterministic": False}):

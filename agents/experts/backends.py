@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from agents.experts.problem import UNREACHABLE, RoutingProblem
+from marl_cover.agents.experts.problem import UNREACHABLE, RoutingProblem
 
 BACKENDS = ("pyvrp", "ortools")
 

@@ -46,8 +46,8 @@ from typing import Any
 
 import numpy as np
 
-from agents.experts.backends import BACKENDS, solve
-from agents.experts.problem import RoutingProblem, build_problem
+from marl_cover.agents.experts.backends import BACKENDS, solve
+from marl_cover.agents.experts.problem import RoutingProblem, build_problem
 from marl_cover.env import CoverageSnapshot
 from marl_cover.graph import SpatialGraph
 

@@ -23,8 +23,13 @@ from typing import Any
 
 import numpy as np
 
-from agents.experts.expert import RoutingExpert, greedy_goals, lowest_action, shortest_moves
-from agents.greedy import FALLBACKS
+from marl_cover.agents.baselines.greedy import FALLBACKS
+from marl_cover.agents.experts.expert import (
+    RoutingExpert,
+    greedy_goals,
+    lowest_action,
+    shortest_moves,
+)
 from marl_cover.env import CoverageSnapshot
 
 

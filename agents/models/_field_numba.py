@@ -1,5 +1,5 @@
-"""A compiled kernel for the distances of :func:`agents.models.gnn.receptive_field` (optional:
-needs numba).
+"""A compiled kernel for the distances of :func:`marl_cover.agents.models.gnn.receptive_field`
+(optional: needs numba).
 
 The torch reference relaxes every edge ``hops - 1`` times (Bellman-Ford, ~3 tensor ops a
 round); on the small graphs a robot decides on, those ~90 calls cost more than the search

@@ -30,19 +30,20 @@ tests that check the fast path and its gradients against it.
 
 from __future__ import annotations
 
-import warnings
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import NamedTuple, cast
 
 import torch
 from torch import nn
 
-from marl_cover.ego import NUM_ACTIONS, NUM_NODE_FEATURES, STAY
-
-try:  # optional (the ``fast`` extra): the receptive field's distances, compiled
-    from agents.models._field_numba import capped_distances as _capped_distances
-except ImportError:
-    _capped_distances = None  # type: ignore[assignment]
+from marl_cover.agents.models import growth
+from marl_cover.agents.models.aggregation import (
+    _Diffusion,
+    mean_aggregate,
+    mean_operator,
+    receptive_field,
+)
+from marl_cover.ego import NUM_NODE_FEATURES
 
 KINDS = ("linear", "nonlinear")
 
@@ -164,202 +165,6 @@ def _run_tail(tail: tuple[tuple[torch.Tensor, torch.Tensor], ...], x: torch.Tens
     return x
 
 
-def with_time_feature(nodes: torch.Tensor, steps_left: torch.Tensor, horizon: int) -> torch.Tensor:
-    """``nodes (*B, ..., M, F)`` with ``steps_left (*B,) / horizon`` appended to every node,
-    ``(*B, ..., M, F + 1)``."""
-    fraction = steps_left.to(nodes.dtype) / horizon
-    fraction = fraction.reshape(*fraction.shape, *([1] * (nodes.dim() - fraction.dim())))
-    return torch.cat([nodes, fraction.expand(*nodes.shape[:-1], 1)], dim=-1)
-
-
-def timed_nodes(model: AggregationGNN, batch: dict[str, torch.Tensor]) -> torch.Tensor:
-    """``batch["nodes"]`` with the time feature when ``model`` reads one.
-
-    Raises:
-        KeyError: the model reads the time but ``batch`` has no ``steps_left``.
-    """
-    horizon = model.config.time_horizon
-    if horizon is None:
-        return batch["nodes"]
-    if "steps_left" not in batch:
-        raise KeyError(
-            f"this model reads the time (time_horizon={horizon}) but the input has no "
-            "'steps_left' (the actions left in the episode)"
-        )
-    return with_time_feature(batch["nodes"], batch["steps_left"], horizon)
-
-
-def mean_aggregate(
-    messages: torch.Tensor, receivers: torch.Tensor, num_nodes: int, inverse_degree: torch.Tensor
-) -> torch.Tensor:
-    """Mean of ``messages (E, H)`` at each receiver, ``(num_nodes, H)`` (0 without edges)."""
-    total = messages.new_zeros(num_nodes, messages.shape[1]).index_add_(0, receivers, messages)
-    return total * inverse_degree
-
-
-def mean_operator(
-    edge_index: torch.Tensor, num_nodes: int, dtype: torch.dtype, transpose: bool = False
-) -> torch.Tensor:
-    """Sparse ``(V, V)`` matrix ``A`` with ``(A h)_i`` = mean of ``h_j`` over edges ``j -> i``,
-    in compressed-row (CSR) form: its products cost a fifth of a coordinate-format one's here.
-
-    ``transpose=True`` gives ``A^T`` instead, its columns sorted within each row as torch's own
-    conversion of ``A.t()`` sorts them, so that products with it equal that conversion's bit for
-    bit (what the backward of :class:`_Diffusion` multiplies by).
-    """
-    senders, receivers = edge_index[0], edge_index[1]
-    degree = torch.bincount(receivers, minlength=num_nodes)
-    if transpose:  # rows: senders; columns: receivers, ascending within a row
-        order = torch.argsort(senders * num_nodes + receivers, stable=True)
-        column_of, row_counts = receivers, torch.bincount(senders, minlength=num_nodes)
-    else:
-        order = torch.argsort(receivers, stable=True)
-        column_of, row_counts = senders, degree
-    # int32 indices: the CPU kernel (MKL) would otherwise convert them at every product
-    rows = torch.zeros(num_nodes + 1, dtype=torch.int32, device=edge_index.device)
-    torch.cumsum(row_counts, 0, out=rows[1:])
-    columns = column_of[order].to(torch.int32)
-    values = (1.0 / degree.clamp(min=1).to(dtype))[receivers[order]]
-    with warnings.catch_warnings():  # CSR is "beta" in torch; this use is plain and tested
-        warnings.simplefilter("ignore", UserWarning)
-        return torch.sparse_csr_tensor(
-            rows, columns, values, (num_nodes, num_nodes), check_invariants=False
-        )
-
-
-class _Diffusion(torch.autograd.Function):
-    """``A @ h`` for the CSR mean operator ``A`` whose transpose ``A^T`` is given: the backward
-    multiplies by ``A^T`` built once per forward pass, where ``torch.sparse.mm``'s own backward
-    converts ``A.t()`` to CSR at every hop (45 ms a hop on a batch of 1000 states of the paper's
-    windows, 10% of a fine-tuning iteration). The gradients are the same, bit for bit."""
-
-    @staticmethod
-    def forward(
-        ctx: torch.autograd.function.FunctionCtx,
-        operator: torch.Tensor,
-        transposed: torch.Tensor,
-        h: torch.Tensor,
-    ) -> torch.Tensor:
-        ctx.transposed = transposed  # type: ignore[attr-defined]
-        return torch.sparse.mm(operator, h)
-
-    @staticmethod
-    def backward(
-        ctx: torch.autograd.function.FunctionCtx, grad: torch.Tensor
-    ) -> tuple[None, None, torch.Tensor]:
-        return None, None, torch.sparse.mm(ctx.transposed, grad)  # type: ignore[attr-defined]
-
-
-@dataclass(frozen=True)
-class ReceptiveField:
-    """The part of a flat graph that a ``hops``-block network's output edges depend on, in
-    receptive-field order (see :func:`receptive_field`).
-
-    Attributes:
-        node_order: ``(V',)`` ids of the kept nodes, by hop distance to an output edge.
-        edge_order: ``(E',)`` ids of the kept edges, by their receiver's distance.
-        edge_index: ``(2, E')`` the kept edges between the kept nodes' new ids.
-        out_positions: ``(O,)`` position of each output edge among the kept edges.
-        node_counts: ``node_counts[d]``: kept nodes within ``d`` hops of an output edge.
-        edge_counts: ``edge_counts[d]``: kept edges whose receiver is within ``d`` hops.
-    """
-
-    node_order: torch.Tensor
-    edge_order: torch.Tensor
-    edge_index: torch.Tensor
-    out_positions: torch.Tensor
-    node_counts: list[int]
-    edge_counts: list[int]
-
-
-def output_distances(
-    edge_index: torch.Tensor,
-    out_edges: torch.Tensor,
-    hops: int,
-    num_nodes: int,
-    compiled: bool | None = None,
-) -> torch.Tensor:
-    """Each node's hop count along the edges to an endpoint of an output edge, capped at
-    ``hops`` (more than ``hops - 1``, or never), ``(num_nodes,)`` long.
-
-    Args:
-        edge_index: ``(2, E)`` long, ``[sender; receiver]``.
-        out_edges: ``(O,)`` long ids of the output edges.
-        hops: The cap.
-        num_nodes: Nodes of the graph.
-        compiled: A breadth-first search by the numba kernel (CPU tensors only) or the
-            reference's ``hops - 1`` Bellman-Ford rounds in torch; both give the same numbers.
-            ``None``: the kernel where it can run (numba installed, tensors on the CPU).
-    """
-    senders, receivers = edge_index[0], edge_index[1]
-    if compiled is None:
-        compiled = _capped_distances is not None and edge_index.device.type == "cpu"
-    elif compiled and (_capped_distances is None or edge_index.device.type != "cpu"):
-        raise ValueError("compiled distances need numba installed and CPU tensors")
-    if compiled:
-        sources = torch.cat([senders[out_edges], receivers[out_edges]])
-        found = _capped_distances(
-            senders.contiguous().numpy(),
-            receivers.contiguous().numpy(),
-            sources.numpy(),
-            num_nodes,
-            hops,
-        )
-        return torch.from_numpy(found)
-    distance = torch.full((num_nodes,), hops, dtype=torch.long, device=edge_index.device)
-    distance[senders[out_edges]] = 0
-    distance[receivers[out_edges]] = 0
-    for _ in range(hops - 1):  # Bellman-Ford rounds toward the outputs, up to hops - 1
-        reach = distance.index_select(0, receivers) + 1
-        distance = distance.scatter_reduce(0, senders, reach, "amin")
-    return distance
-
-
-def receptive_field(
-    edge_index: torch.Tensor, out_edges: torch.Tensor, hops: int, num_nodes: int
-) -> ReceptiveField:
-    """Which nodes and edges ``hops`` message-passing blocks need for the ``out_edges``.
-
-    A node's distance is its hop count along the edges to an endpoint of an output edge. The
-    output edges read their endpoints' latents after block ``K - 1``; a node's latent after
-    block ``k`` is read by the next block only when the node lies within ``K - 1 - k`` hops;
-    so block ``k < K - 1`` needs the edges into the nodes within ``K - 2 - k`` hops (the node
-    update of those nodes, whose senders lie within ``K - 1 - k``) and block ``K - 1`` the
-    output edges alone. Sorting nodes by distance and edges by their receiver's makes each
-    block's work a prefix of the arrays; the rest of the graph is never computed, and the
-    outputs are those of the whole graph. On an ego-graph of the paper's windows at K = 19
-    about half the edge work remains; on a state of 100 robots on the 5659-waypoint map, a
-    fifth.
-
-    Args:
-        edge_index: ``(2, E)`` long, ``[sender; receiver]``.
-        out_edges: ``(O,)`` long ids of the output edges.
-        hops: Blocks of the network (its receptive field).
-        num_nodes: Nodes of the graph.
-    """
-    receivers = edge_index[1]
-    # distances are capped at hops: such nodes are never needed
-    distance = output_distances(edge_index, out_edges, hops, num_nodes)
-    node_order = torch.argsort(distance, stable=True)
-    node_counts = torch.bincount(distance, minlength=hops + 1).cumsum(0).tolist()
-    node_order = node_order[: node_counts[hops - 1]]
-    new_id = torch.empty_like(distance)
-    new_id[node_order] = torch.arange(node_order.shape[0], device=distance.device)
-    edge_distance = distance[receivers]
-    edge_counts = torch.bincount(edge_distance, minlength=hops + 1).cumsum(0).tolist()
-    edge_order = torch.argsort(edge_distance, stable=True)[: edge_counts[max(hops - 2, 0)]]
-    position = torch.full_like(receivers, -1)
-    position[edge_order] = torch.arange(edge_order.shape[0], device=distance.device)
-    return ReceptiveField(
-        node_order=node_order,
-        edge_order=edge_order,
-        edge_index=new_id[edge_index[:, edge_order]],
-        out_positions=position[out_edges],
-        node_counts=node_counts,
-        edge_counts=edge_counts,
-    )
-
-
 class AggregationGNN(nn.Module):
     """Edge logits of a graph of robots and waypoints (see the module docstring)."""
 
@@ -395,184 +200,24 @@ class AggregationGNN(nn.Module):
         return AggregationGNN(config).to(device=parameter.device, dtype=parameter.dtype)
 
     def per_hop_copy(self) -> AggregationGNN:
-        """The same function as a model with a block of its own for each hop.
-
-        Every hop's edge and node MLP starts as a copy of this model's shared block (the last
-        hop has no node MLP), so the copy's logits equal this model's; training can then let
-        the hops differ. A way to grow a trained shared-block model without starting over.
-
-        Raises:
-            ValueError: this is not a non-linear model with a shared block.
-        """
-        if self.config.kind != "nonlinear" or self.config.per_hop:
-            raise ValueError(
-                f"per_hop_copy needs a non-linear shared-block model, got {self.config}"
-            )
-        copy = self._fresh(replace(self.config, per_hop=True))
-        # encoders, decoder and readout by name (the shared blocks have no namesake there)
-        copy.load_state_dict(self.state_dict(), strict=False)
-        for block in copy.edge_blocks:
-            block.load_state_dict(self.edge_block.state_dict())
-        for block in copy.node_blocks:
-            block.load_state_dict(self.node_block.state_dict())
-        if self.config.norm:
-            for norm in copy.edge_norms:
-                norm.load_state_dict(self.edge_norms[0].state_dict())
-            for norm in copy.node_norms:
-                norm.load_state_dict(self.node_norms[0].state_dict())
-        return copy.train(self.training)
+        """The same function with a block of its own for each hop (:func:`growth.per_hop_copy`)."""
+        return growth.per_hop_copy(self)
 
     def deeper_copy(self, hops: int) -> AggregationGNN:
-        """The same function as a model with a larger receptive field, ``hops`` blocks.
-
-        The readout's weights of the new stages (after blocks ``K + 1 .. hops``) are zero, so
-        the logits are unchanged; they get gradients, so training can put the far hops to use.
-        A per-hop model's new blocks start as copies of its last ones (the last edge block, and
-        the last node block for the node updates that now reach an output). A way to widen a
-        trained model's view (its ego-graphs must then be ``hops`` hops too) without starting
-        over.
-
-        Raises:
-            ValueError: ``hops`` is not larger than this model's.
-        """
-        old_hops, hidden = self.config.hops, self.config.hidden
-        if hops <= old_hops:
-            raise ValueError(f"deeper_copy needs hops > {old_hops}, got {hops}")
-        copy = self._fresh(replace(self.config, hops=hops))
-        state = {k: v for k, v in self.state_dict().items() if not k.startswith("readout.")}
-        copy.load_state_dict(state, strict=False)
-        with torch.no_grad():
-            copy.readout.weight.zero_()
-            copy.readout.weight[:, : (old_hops + 1) * hidden] = self.readout.weight
-            copy.readout.bias.copy_(self.readout.bias)
-        if self.config.kind == "nonlinear" and self.config.per_hop:
-            # (new modules, old modules, first new hop): the new hops copy the last old one
-            grown = [(copy.edge_blocks, self.edge_blocks, old_hops)]
-            grown.append((copy.node_blocks, self.node_blocks, old_hops - 1))
-            if self.config.norm:
-                grown.append((copy.edge_norms, self.edge_norms, old_hops))
-                grown.append((copy.node_norms, self.node_norms, old_hops - 1))
-            for new, old, first in grown:
-                for module in list(new)[first:] if len(old) else []:  # a 1-hop model: no node
-                    module.load_state_dict(old[-1].state_dict())
-        return copy.train(self.training)
+        """The same function with more hops (:func:`growth.deeper_copy`)."""
+        return growth.deeper_copy(self, hops)
 
     def wider_copy(self, hidden: int, seed: int = 0) -> AggregationGNN:
-        """The same function as a model with ``hidden`` units in every MLP and latent.
-
-        The new units get a fresh initialisation (from ``seed``) and every weight from a new
-        unit into an old one is zero, so the old units compute what they did and the logits are
-        unchanged; the zero weights get gradients (the new units are active), so training can
-        put the new width to use. A way to grow a trained model without starting over.
-
-        Raises:
-            ValueError: ``hidden`` is not larger than this model's width.
-        """
-        old_width = self.config.hidden
-        if hidden <= old_width:
-            raise ValueError(f"wider_copy needs hidden > {old_width}, got {hidden}")
-        if self.config.norm:
-            raise ValueError("wider_copy cannot keep the function of a model with norm")
-        with torch.random.fork_rng(devices=[]):
-            torch.manual_seed(seed)
-            copy = self._fresh(replace(self.config, hidden=hidden))
-        old_layers = dict(self.named_modules())
-        with torch.no_grad():
-            for name, layer in copy.named_modules():
-                if not isinstance(layer, nn.Linear):
-                    continue
-                old = old_layers[name]
-                rows = _widened_indices(old.out_features, layer.out_features, old_width)
-                columns = _widened_indices(old.in_features, layer.in_features, old_width)
-                # old units read old units only; new units read everything
-                layer.weight[rows] = 0.0
-                layer.weight[rows.unsqueeze(1), columns] = old.weight
-                layer.bias[rows] = old.bias
-            if self.stay_logit is not None and copy.stay_logit is not None:
-                copy.stay_logit.copy_(self.stay_logit)
-        return copy.train(self.training)
+        """The same function with more hidden units (:func:`growth.wider_copy`)."""
+        return growth.wider_copy(self, hidden, seed)
 
     def with_stay_bias(self, stay_bias: float) -> AggregationGNN:
-        """This model with a learned stay offset (``GNNConfig.stay_bias``) starting at
-        ``stay_bias``: every stay logit moves by that much, nothing else changes.
-
-        Raises:
-            ValueError: the model has an offset already.
-        """
-        if self.stay_logit is not None:
-            raise ValueError(f"the model has a stay offset already ({self.config.stay_bias})")
-        copy = self._fresh(replace(self.config, stay_bias=float(stay_bias)))
-        copy.load_state_dict(self.state_dict(), strict=False)  # all but the new offset
-        return copy.train(self.training)
-
-    @staticmethod
-    def merged(models: list[AggregationGNN]) -> AggregationGNN:
-        """One network whose logits are the mean of ``models``' logits (an ensemble in one).
-
-        The members sit side by side in a model ``len(models)`` times as wide: every MLP's
-        weights are block-diagonal (member ``m`` reads and writes only its own units within
-        each latent), the encoders share the raw features, and the readout averages the
-        members' logits. Its argmax action is the ensemble's of
-        :class:`~agents.models.policy.EnsemblePolicy` (a mean of log-softmaxes differs from
-        the mean of logits by a constant per robot); one forward pass, no per-member calls.
-
-        Raises:
-            ValueError: no member, members of different configs, or a member with ``norm``
-                (a layer norm across the merged width would mix the members).
-        """
-        if not models:
-            raise ValueError("merging needs at least one model")
-        config = models[0].config
-        for index, model in enumerate(models):
-            if model.config != config:
-                raise ValueError(f"member {index} is a {model.config}, member 0 a {config}")
-        if config.norm:
-            raise ValueError("cannot merge models with norm (a layer norm would mix members)")
-        num, width = len(models), config.hidden
-        with torch.random.fork_rng(devices=[]):  # every weight is set below: no global draw
-            merged = models[0]._fresh(replace(config, hidden=num * width))
-        members = [dict(model.named_modules()) for model in models]
-        with torch.no_grad():
-            for name, layer in merged.named_modules():
-                if not isinstance(layer, nn.Linear):
-                    continue
-                layer.weight.zero_()
-                layer.bias.zero_()
-                # the readout keeps its one logit: each member adds its share of the mean
-                share = num if layer.out_features == members[0][name].out_features else 1
-                for m, modules in enumerate(members):
-                    old = modules[name]
-                    rows = _member_indices(old.out_features, layer.out_features, width, m)
-                    columns = _member_indices(old.in_features, layer.in_features, width, m)
-                    layer.weight[rows.unsqueeze(1), columns] += old.weight / share
-                    layer.bias[rows] += old.bias / share
-            if merged.stay_logit is not None:  # the mean of logits: the mean of the offsets
-                offsets = [cast(torch.Tensor, model.stay_logit) for model in models]
-                merged.stay_logit.copy_(torch.stack(offsets).mean())
-        return merged.train(models[0].training)
+        """This model with a learned stay offset (:func:`growth.with_stay_bias`)."""
+        return growth.with_stay_bias(self, stay_bias)
 
     def grown_to(self, config: GNNConfig, seed: int = 0) -> AggregationGNN:
-        """This model grown to ``config`` with the same logits: a block per hop
-        (:meth:`per_hop_copy`), more hops (:meth:`deeper_copy`) and more width
-        (:meth:`wider_copy`) as ``config`` asks; itself when ``config`` is its own. A
-        ``stay_bias`` that this model lacks adds a learned stay offset
-        (:meth:`with_stay_bias`), the one change of logits: the stays move by that much.
-
-        Raises:
-            ValueError: ``config`` differs in anything else, or asks for less.
-        """
-        grown = self
-        if config.stay_bias is not None and self.config.stay_bias is None:
-            grown = grown.with_stay_bias(config.stay_bias)
-        if config.per_hop and not self.config.per_hop and self.config.kind == "nonlinear":
-            grown = grown.per_hop_copy()
-        if config.hops > self.config.hops:
-            grown = grown.deeper_copy(config.hops)
-        if config.hidden > self.config.hidden:
-            grown = grown.wider_copy(config.hidden, seed=seed)
-        if grown.config != config:
-            raise ValueError(f"a {self.config} cannot grow into a {config}")
-        return grown
+        """This model grown to ``config`` with the same logits (:func:`growth.grown_to`)."""
+        return growth.grown_to(self, config, seed)
 
     def norms(self, hop: int) -> tuple[nn.LayerNorm | None, nn.LayerNorm | None]:
         """The edge and node layer norms at ``hop`` (``None`` without ``norm``, and for the
@@ -793,101 +438,3 @@ class AggregationGNN(nn.Module):
                     h = h_new + h if self.config.residual else h_new
             stages.append(self.edge_decoder(e))
         return self.readout(torch.cat(stages, dim=1)).squeeze(1)
-
-
-def _widened_indices(size: int, new_size: int, old_width: int) -> torch.Tensor:
-    """Where the ``size`` entries of one side of a linear layer go in its widened copy
-    (``new_size`` entries): a side that kept its size (raw features, the readout's logit) maps
-    to itself; a concatenation of latents ``old_width`` wide keeps each latent's entries at the
-    start of its widened segment."""
-    index = torch.arange(size)
-    if new_size == size:
-        return index
-    width = new_size // (size // old_width)
-    return index // old_width * width + index % old_width
-
-
-def _member_indices(size: int, new_size: int, width: int, member: int) -> torch.Tensor:
-    """Where member ``member``'s ``size`` entries of one side of a linear layer go in a merge of
-    members ``width`` wide (``new_size`` entries): a side that kept its size (raw features, the
-    readout's logit) is shared; a concatenation of latents puts the member's units at its offset
-    within each widened segment."""
-    index = _widened_indices(size, new_size, width)
-    return index if new_size == size else index + member * width
-
-
-def flatten_padded(
-    batch: dict[str, torch.Tensor], num_heads: int = NUM_ACTIONS
-) -> tuple[torch.Tensor, ...]:
-    """A batch of padded graphs ``(B, M, ...)`` as one flat graph without padded edges.
-
-    With a ``node_mask`` (real nodes are a prefix of each graph), node padding beyond the
-    largest graph of the batch is cut off too: real edges never touch it, so the outputs are
-    unchanged and a large padded shape costs nothing.
-
-    Args:
-        batch: Padded graph arrays with a leading batch axis.
-        num_heads: Leading edges of each graph whose flat ids are returned (the five action
-            edges of an ego-graph; ``5 R`` for a state's robots).
-
-    Returns:
-        ``nodes (B*M', F)`` with ``M' <= M``, ``edge_index (2, E')``, ``edge_attr (E', 1)``,
-        and the flat edge id of each graph's first ``num_heads`` edges, ``(B, num_heads)``
-        (``-1`` where padded).
-    """
-    nodes, edge_index = batch["nodes"], batch["edge_index"]
-    if "node_mask" in batch and nodes.shape[1] > 0:
-        num_real = int(batch["node_mask"].reshape(nodes.shape[0], -1).sum(1).max())
-        nodes = nodes[:, : max(num_real, 1)]
-    num_graphs, num_nodes = nodes.shape[:2]
-    num_edges = edge_index.shape[2]
-    keep = batch["edge_mask"].reshape(-1).bool()
-    offsets = (torch.arange(num_graphs, device=nodes.device) * num_nodes).view(-1, 1, 1)
-    flat_index = (edge_index.long() + offsets).permute(1, 0, 2).reshape(2, -1)[:, keep]
-    flat_attr = batch["edge_attr"].reshape(-1, batch["edge_attr"].shape[-1])[keep]
-    new_id = torch.cumsum(keep.long(), 0) - 1
-    heads = (torch.arange(num_graphs, device=nodes.device) * num_edges).view(-1, 1)
-    heads = heads + torch.arange(num_heads, device=nodes.device)
-    action_edges = torch.where(keep[heads], new_id[heads], torch.full_like(heads, -1))
-    return nodes.reshape(-1, nodes.shape[-1]), flat_index, flat_attr, action_edges
-
-
-def action_logits(
-    model: AggregationGNN,
-    graph: tuple[torch.Tensor, torch.Tensor, torch.Tensor],
-    action_edges: torch.Tensor,
-) -> torch.Tensor:
-    """Logits ``(R, 5)`` of the action edges ``(R, 5)`` of a flat graph; ``-inf`` where ``-1``."""
-    picked = model(*graph, out_edges=action_edges.clamp(min=0).reshape(-1))
-    logits = picked.view(action_edges.shape)
-    if model.stay_logit is not None:  # (GNNConfig.stay_bias) added to the stay slot only
-        slot = torch.zeros(NUM_ACTIONS, dtype=logits.dtype, device=logits.device)
-        slot[STAY] = 1.0
-        logits = logits + slot * model.stay_logit.to(logits.dtype)
-    return logits.masked_fill(action_edges < 0, float("-inf"))
-
-
-def decentralized_logits(model: AggregationGNN, batch: dict[str, torch.Tensor]) -> torch.Tensor:
-    """Action logits ``(B, 5)`` of each ego robot from its padded ego-graph (node 0) (and its
-    ``steps_left (B,)`` when the model reads the time)."""
-    batch = {**batch, "nodes": timed_nodes(model, batch)}
-    nodes, edge_index, edge_attr, action_edges = flatten_padded(batch)
-    return action_logits(model, (nodes, edge_index, edge_attr), action_edges)
-
-
-def centralized_logits(model: AggregationGNN, state: dict[str, torch.Tensor]) -> torch.Tensor:
-    """Action logits ``(R, 5)`` of every robot from one pass over ``state()``."""
-    batch = {k: v.unsqueeze(0) for k, v in state.items() if k != "robot_nodes"}
-    return batched_state_logits(model, batch, state["robot_nodes"].shape[-1])[0]
-
-
-def batched_state_logits(
-    model: AggregationGNN, batch: dict[str, torch.Tensor], num_robots: int
-) -> torch.Tensor:
-    """Action logits ``(B, R, 5)`` of every robot of a batch of padded states ``(B, M, ...)``,
-    one pass over all of them (``-inf`` where an action has no edge; ``steps_left (B,)`` when
-    the model reads the time)."""
-    batch = {**batch, "nodes": timed_nodes(model, batch)}
-    nodes, edge_index, edge_attr, heads = flatten_padded(batch, NUM_ACTIONS * num_robots)
-    logits = action_logits(model, (nodes, edge_index, edge_attr), heads.view(-1, NUM_ACTIONS))
-    return logits.view(heads.shape[0], num_robots, NUM_ACTIONS)

@@ -1,18 +1,13 @@
 """Critics: aggregation GNNs that read a robot's value off its stay edge.
 
-The critic is an :class:`~agents.models.gnn.AggregationGNN` of its own (no weights shared with
-the actor) whose output on a robot's stay edge (action slot 0, waypoint -> robot, present at
+The critic is an :class:`~marl_cover.agents.models.gnn.AggregationGNN` of its own (no weights shared
+with the actor) whose output on a robot's stay edge (action slot 0, waypoint -> robot, present at
 every step) is that robot's value:
 
 - :class:`StateValue` (MAPPO): one pass over the whole-graph ``state`` gives every robot's
   value, ``(..., R, 1)``; ``aggregate="sum"`` gives the paper's team value ``sum_r v_r``
   (``reference_impl.md`` section 3) at every robot instead.
 - :class:`EgoValue` (IPPO): each robot's value from its own ego-graph, ``(..., 1)``.
-
-With ``horizon`` (the episode length), both also read ``steps_left`` (the state's actions left)
-and give the network ``steps_left / horizon`` as one more feature of every node: in a
-fixed-length episode the same graph is worth less when fewer steps are left, which the graph
-alone does not tell.
 """
 
 from __future__ import annotations
@@ -20,8 +15,9 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from agents.models.gnn import AggregationGNN, flatten_padded, with_time_feature
-from agents.models.policy import flat_batch
+from marl_cover.agents.models.actors import flat_batch
+from marl_cover.agents.models.gnn import AggregationGNN
+from marl_cover.agents.models.logits import flatten_padded
 from marl_cover.ego import NUM_ACTIONS
 
 AGGREGATES = ("robot", "sum")
@@ -35,26 +31,15 @@ class StateValue(nn.Module):
         num_robots: Robots per state (the state's first ``5 R`` edges are their action edges).
         aggregate: ``"robot"``: each robot's own output; ``"sum"``: the sum over the team,
             repeated for every robot.
-        horizon: Episode length; given, ``forward`` takes ``steps_left`` and ``gnn`` reads one
-            node feature more than the observations have.
     """
 
-    def __init__(
-        self,
-        gnn: AggregationGNN,
-        num_robots: int,
-        aggregate: str = "robot",
-        horizon: int | None = None,
-    ) -> None:
+    def __init__(self, gnn: AggregationGNN, num_robots: int, aggregate: str = "robot") -> None:
         super().__init__()
         if aggregate not in AGGREGATES:
             raise ValueError(f"aggregate must be one of {AGGREGATES}, got {aggregate!r}")
-        if horizon is not None and horizon < 1:
-            raise ValueError(f"horizon must be >= 1, got {horizon}")
         self.gnn = gnn
         self.num_robots = num_robots
         self.aggregate = aggregate
-        self.horizon = horizon
 
     def forward(
         self,
@@ -63,13 +48,8 @@ class StateValue(nn.Module):
         edge_attr: torch.Tensor,
         edge_mask: torch.Tensor,
         node_mask: torch.Tensor,
-        steps_left: torch.Tensor | None = None,
     ) -> torch.Tensor:
         """Value ``(..., R, 1)`` of every robot from padded states ``(..., M, *)``."""
-        if (steps_left is None) != (self.horizon is None):
-            raise ValueError("steps_left must be given exactly when the critic has a horizon")
-        if steps_left is not None and self.horizon is not None:
-            nodes = with_time_feature(nodes, steps_left, self.horizon)
         lead, r = nodes.shape[:-2], self.num_robots
         batch = flat_batch(nodes, edge_index, edge_attr, edge_mask, node_mask)
         flat_nodes, flat_index, flat_attr, heads = flatten_padded(batch, NUM_ACTIONS * r)
@@ -85,8 +65,8 @@ class EgoValue(StateValue):
     """Value ``(..., 1)`` of each ego robot from its padded ego-graph ``(..., M, *)`` (laid
     out as a state with one robot, the ego)."""
 
-    def __init__(self, gnn: AggregationGNN, horizon: int | None = None) -> None:
-        super().__init__(gnn, num_robots=1, horizon=horizon)
+    def __init__(self, gnn: AggregationGNN) -> None:
+        super().__init__(gnn, num_robots=1)
 
     def forward(
         self,
@@ -95,8 +75,7 @@ class EgoValue(StateValue):
         edge_attr: torch.Tensor,
         edge_mask: torch.Tensor,
         node_mask: torch.Tensor,
-        steps_left: torch.Tensor | None = None,
     ) -> torch.Tensor:
         """Value ``(..., 1)`` of each ego robot from its padded ego-graph ``(..., M, *)``."""
-        values = super().forward(nodes, edge_index, edge_attr, edge_mask, node_mask, steps_left)
+        values = super().forward(nodes, edge_index, edge_attr, edge_mask, node_mask)
         return values.squeeze(-2)

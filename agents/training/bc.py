@@ -33,10 +33,9 @@ with the next round, as one longer run would have.
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -44,197 +43,38 @@ import numpy as np
 import torch
 from torch.nn import functional
 
-from agents import configuration
-from agents.cli import write_text_atomic
-from agents.datasets import (
+from marl_cover.agents.cli import options as configuration
+from marl_cover.agents.evaluation.episodes import evaluate
+from marl_cover.agents.io import write_text_atomic
+from marl_cover.agents.models.checkpoints import load_model, save_model
+from marl_cover.agents.models.gnn import AggregationGNN
+from marl_cover.agents.models.logits import action_logits
+from marl_cover.agents.models.policy import GNNPolicy
+from marl_cover.agents.models.shipped import model_path
+from marl_cover.agents.training.bc_config import BCConfig, DaggerConfig
+from marl_cover.agents.training.dagger import (
+    dagger_round,
+    reused_episodes,
+    sensor_range_of,
+    with_ties,
+)
+from marl_cover.agents.training.data import GraphTable, collate_states, episode_transitions
+from marl_cover.agents.training.datasets import (
     SHARD_PATTERN,
     Episode,
     load_dataset,
     read_shard,
-    trajectory_ties,
     write_shard,
 )
-from agents.evaluation import evaluate
-from agents.experts.expert import INFORMATION
-from agents.models.gnn import AggregationGNN, GNNConfig, action_logits
-from agents.models.policy import EnsemblePolicy, GNNPolicy, load_model, save_model
-from agents.training.data import GraphTable, collate_states, episode_transitions
-from agents.training.runs import LOGGERS, check_same_run, make_logger
-from marl_cover.config import require
+from marl_cover.agents.training.runs import check_same_run, make_logger
 from marl_cover.ego import NUM_ACTIONS
 from marl_cover.env import CoverageEnv
 
 logger = logging.getLogger(__name__)
 
-
-@dataclass
-class DaggerConfig:
-    """DAgger rounds after the initial behaviour cloning (``rounds = 0``: off).
-
-    Attributes:
-        rounds: Rounds of roll-out, labelling and retraining.
-        episodes: Episodes rolled out per round.
-        beta: Probability of executing the expert's action at a step, first round.
-        beta_decay: ``beta`` is multiplied by this after each round.
-        steps: Training steps after each round.
-        iterations: Expert solver iterations per label (PyVRP; deterministic labels).
-        seed: First roll-out episode seed (rounds use consecutive blocks).
-        fraction: Share of every batch drawn from the DAgger states once there are any (the
-            rest from the expert dataset). ``None``: the DAgger states join the dataset and
-            are drawn as often as any transition (a few percent of a batch).
-        expert_mode: The labelling expert: ``"open_loop"`` (the dataset's expert, re-planned
-            from each state the learner leads to), ``"receding"`` (plans over
-            ``expert_horizon`` steps at every state) or ``"gnn"`` (distillation: the argmax of
-            the ``teacher`` networks' pooled log-probabilities, see
-            :class:`~agents.models.policy.EnsemblePolicy`; labels cost a forward pass, not a
-            solve).
-        expert_horizon: Planning horizon of the receding expert, in steps.
-        expert_clock: ``False``: the receding expert plans over ``expert_horizon`` steps even
-            near the end of the episode, so its labels depend only on what the (clock-blind)
-            network sees.
-        expert_information: What the routing expert plans on in exploration
-            (:class:`~agents.experts.RoutingExpert`'s ``information``): ``"full"`` (the true
-            map and every point, the paper's teacher), ``"known"`` or ``"expected"`` (the true
-            map, the discovered points, and each undiscovered waypoint worth the share of
-            points of interest among the discovered ones).
-        env: Overrides of the BC ``env`` for the roll-outs (e.g. ``{"map": "paper_full",
-            "num_robots": 10, "max_steps": 131}``: states of a larger map and team than the
-            dataset's). With any, the DAgger states are collated apart from the dataset's
-            (their own graphs, team size and padding) and ``fraction`` is required.
-        reuse: Folders of DAgger shards labelled by earlier runs (their ``out/dagger``), which
-            join this run's DAgger states before its first round: states another learner
-            visited, labelled by the same kind of expert, are more data near the learner's
-            distribution. They must come from the same roll-out env as this run's.
-        teacher: Model files of the ``expert_mode=gnn`` teacher (one or more).
-    """
-
-    rounds: int = 0
-    episodes: int = 50
-    beta: float = 0.5
-    beta_decay: float = 0.5
-    steps: int = 3000
-    iterations: int = 500
-    seed: int = 1_000_000
-    fraction: float | None = None
-    expert_mode: str = "open_loop"
-    expert_horizon: int | None = None
-    expert_clock: bool = True
-    expert_information: str = "full"
-    env: dict[str, Any] = field(default_factory=dict)
-    reuse: list[str] = field(default_factory=list)
-    teacher: list[str] = field(default_factory=list)
-
-    def __post_init__(self) -> None:
-        if self.fraction is not None and not 0.0 < self.fraction < 1.0:
-            raise ValueError(f"dagger.fraction must be in (0, 1) or null, got {self.fraction}")
-        if self.expert_mode not in ("open_loop", "receding", "gnn"):
-            raise ValueError(
-                "dagger.expert_mode must be 'open_loop', 'receding' or 'gnn', "
-                f"got {self.expert_mode!r}"
-            )
-        if (self.expert_mode == "gnn") != bool(self.teacher):
-            raise ValueError("dagger.expert_mode=gnn and dagger.teacher (model files) go together")
-        if self.expert_mode == "receding" and (
-            self.expert_horizon is None or self.expert_horizon < 1
-        ):
-            raise ValueError("dagger.expert_mode=receding needs dagger.expert_horizon >= 1")
-        if not self.expert_clock and self.expert_mode != "receding":
-            raise ValueError("dagger.expert_clock=false needs dagger.expert_mode=receding")
-        if self.expert_information not in INFORMATION:
-            raise ValueError(
-                f"dagger.expert_information must be one of {INFORMATION}, "
-                f"got {self.expert_information!r}"
-            )
-        if self.expert_information != "full" and self.expert_mode == "gnn":
-            raise ValueError("dagger.expert_information applies to a routing expert only")
-        if self.env and self.fraction is None:
-            raise ValueError("dagger.env needs dagger.fraction (the share of its states)")
-        require(
-            (self.rounds >= 0 and self.steps >= 0, "dagger.rounds and dagger.steps must be >= 0"),
-            (self.episodes >= 1, f"dagger.episodes must be >= 1, got {self.episodes}"),
-            (0.0 <= self.beta <= 1.0, f"dagger.beta must be in [0, 1], got {self.beta}"),
-            (
-                0.0 <= self.beta_decay <= 1.0,
-                f"dagger.beta_decay must be in [0, 1], got {self.beta_decay}",
-            ),
-            (self.iterations >= 1, f"dagger.iterations must be >= 1, got {self.iterations}"),
-            (self.seed >= 0, f"dagger.seed must be >= 0, got {self.seed}"),
-        )
+__all__ = ["BCConfig", "DaggerConfig", "train_bc"]
 
 
-@dataclass
-class BCConfig:
-    """Behaviour cloning settings (see the module docstring for the recipe)."""
-
-    dataset: str = "data/coverage_expert"
-    out: str = "outputs/bc/run"
-    model: GNNConfig = field(default_factory=GNNConfig)
-    # start from this model file: its config must equal ``model``, or be ``model`` with one
-    # shared block where ``model.per_hop`` is set, fewer ``hops`` and/or a smaller ``hidden``
-    # (the model then grows from it with the same logits: AggregationGNN.grown_to)
-    init: str | None = None
-    env: dict[str, Any] = field(default_factory=lambda: {"map": "paper"})
-    batch_size: int = 32
-    lr: float = 1e-3
-    lr_decay: float = 0.95
-    lr_decay_every: int = 200
-    steps: int = 20_000
-    entropy_coef: float = 0.0
-    max_episodes: int | None = None
-    holdout_seeds: list[int] = field(default_factory=lambda: [0, 100])  # [first, stop)
-    val_fraction: float = 0.05
-    val_every: int = 1000
-    select_episodes: int = 20
-    select_seed: int = 10_000
-    select_env: dict[str, Any] = field(default_factory=dict)  # overrides of env for selection
-    # keep the model of every validation step as out/steps/step_NNNNNN.pt (selection on a few
-    # episodes is noisy; these let a longer evaluation choose afterwards)
-    snapshots: bool = True
-    seed: int = 0
-    threads: int = 1
-    logger: str = "csv"
-    progress: bool = True
-    # train on the set of actions as good as each label (batch_loss): the dataset's from its
-    # trajectories (trajectory_ties), the DAgger states' as their expert recorded them
-    ties: bool = False
-    # the loss reads the logits divided by this (argmaxes and accuracies unchanged; 1: plain
-    # cross-entropy). Distilling the exploration rollout, 0.25, 10 and 25 gained nothing (s50)
-    temperature: float = 1.0
-    dagger: DaggerConfig = field(default_factory=DaggerConfig)
-
-    def __post_init__(self) -> None:
-        if self.batch_size < 1 or self.steps < 0 or self.val_every < 1:
-            raise ValueError("batch_size and val_every must be >= 1 and steps >= 0")
-        if not 0.0 < self.val_fraction < 1.0:
-            raise ValueError(f"val_fraction must be in (0, 1), got {self.val_fraction}")
-        if self.logger not in LOGGERS:
-            raise ValueError(f"logger must be one of {LOGGERS}, got {self.logger!r}")
-        if len(self.holdout_seeds) != 2:
-            raise ValueError("holdout_seeds is [first, stop)")
-        require(
-            (self.lr > 0, f"lr must be > 0, got {self.lr}"),
-            (0.0 < self.lr_decay <= 1.0, f"lr_decay must be in (0, 1], got {self.lr_decay}"),
-            (self.lr_decay_every >= 1, f"lr_decay_every must be >= 1, got {self.lr_decay_every}"),
-            (
-                self.max_episodes is None or self.max_episodes >= 1,
-                f"max_episodes must be >= 1 or null, got {self.max_episodes}",
-            ),
-            (
-                self.select_episodes >= 1,
-                f"select_episodes must be >= 1, got {self.select_episodes}",
-            ),
-            (self.seed >= 0 and self.select_seed >= 0, "seed and select_seed must be >= 0"),
-            (self.threads >= 1, f"threads must be >= 1, got {self.threads}"),
-            (self.temperature > 0, f"temperature must be > 0, got {self.temperature}"),
-        )
-
-    @property
-    def total_steps(self) -> int:
-        """Batches of the whole run: the cloning steps plus every DAgger round's."""
-        return self.steps + self.dagger.rounds * self.dagger.steps
-
-
-# ---------------------------------------------------------------------------- data
 def split_episodes(config: BCConfig) -> tuple[list[Episode], list[Episode]]:
     """Train and validation episodes of the dataset (held-out seeds removed, split by episode)."""
     first, stop = config.holdout_seeds
@@ -290,7 +130,6 @@ def batch_loss(
     max_steps: int | None = None,
     extra: Part | None = None,
     ties: bool = False,
-    temperature: float = 1.0,
 ) -> tuple[torch.Tensor, dict[str, float]]:
     """Mean cross-entropy of the expert's actions over every robot of a batch of transitions
     (``max_steps``: actions per episode, for a model that reads the time), and of the ``extra``
@@ -299,8 +138,7 @@ def batch_loss(
     With ``ties`` the loss is instead the negative log-probability of the set of actions the
     expert rated as good as its label (the transitions' ``accept`` bit masks): a learner is not
     pushed toward the expert's tie-break between equally short paths. The metrics hold both,
-    and the accuracy of the argmax against the label and against the set. ``temperature``
-    divides the logits the losses read (the accuracies are the argmax's either way)."""
+    and the accuracy of the argmax against the label and against the set."""
     parts = [Part(batch, table, max_steps)] + ([] if extra is None else [extra])
     logit_parts, targets, accepts = [], [], []
     for part in parts:
@@ -311,7 +149,6 @@ def batch_loss(
         targets.append(part.batch["action"].reshape(-1))
         accepts.append(part.batch["accept"].reshape(-1))
     logits, target, accept = torch.cat(logit_parts), torch.cat(targets), torch.cat(accepts)
-    logits = logits / temperature
     # robots without a label (-1: they did not decide at that state) do not count
     labelled = target >= 0  # (B*R,)
     if not bool(labelled.any()):
@@ -366,91 +203,6 @@ def selection_reward(model: AggregationGNN, env: CoverageEnv, config: BCConfig) 
     return summary.mean
 
 
-# ---------------------------------------------------------------------------- DAgger
-def dagger_round(
-    model: AggregationGNN, env: CoverageEnv, config: BCConfig, round_index: int
-) -> list[Episode]:
-    """Rolls out the mixed policy and labels every visited state with the expert.
-
-    The open-loop expert re-plans whenever the robots are not where its plan expected, so its
-    label at a state the learner led to is the first hop of a fresh plan from that state; the
-    receding expert (``dagger.expert_mode``) plans afresh at every state.
-    """
-    dagger = config.dagger
-    beta = dagger.beta * dagger.beta_decay**round_index
-    policy = GNNPolicy(model, centralized=True)
-    first = dagger.seed + round_index * dagger.episodes
-    teacher = _teacher(dagger)
-    episodes = []
-    for seed in range(first, first + dagger.episodes):
-        expert = None if teacher is not None else _routing_expert(dagger, seed)
-        rng = np.random.default_rng(seed)
-        env.reset(seed=seed)
-        start = env.snapshot()
-        positions, labels, accepted = [start.robot_node.copy()], [], []
-        while env.agents:
-            state = env.state()
-            if teacher is not None:
-                label = teacher.act_state(state)
-                accepted.append(1 << label)
-            else:
-                assert expert is not None  # made for every episode without a teacher
-                label = expert.act_snapshot(env.snapshot())
-                accepted.append(expert.accept.copy())
-            learner = policy.act_state(state)
-            executed = np.where(rng.random(len(label)) < beta, label, learner)
-            labels.append(label)
-            env.step(dict(zip(env.possible_agents, executed.tolist(), strict=True)))
-            positions.append(env.snapshot().robot_node.copy())
-        episodes.append(
-            Episode(
-                seed=seed,
-                graph=start.graph,
-                interest=start.interest.copy(),
-                robot_node=np.array(positions, dtype=np.int64),
-                actions=np.array(labels, dtype=np.int8),
-                fallbacks=0 if expert is None else int(expert.counts.get("fallback_steps", 0)),
-                accept=np.array(accepted, dtype=np.int8),
-            )
-        )
-    model.train()
-    return episodes
-
-
-def _with_ties(episode: Episode) -> Episode:
-    """``episode`` with its tie sets (:func:`trajectory_ties`) unless it records its own."""
-    if episode.accept is not None:
-        return episode
-    return dataclasses.replace(episode, accept=trajectory_ties(episode))
-
-
-def _routing_expert(dagger: DaggerConfig, seed: int) -> Any:
-    """The routing expert that labels one roll-out."""
-    from agents.experts import RoutingExpert
-
-    return RoutingExpert(
-        mode=dagger.expert_mode,
-        horizon=dagger.expert_horizon,
-        clock=dagger.expert_clock,
-        information=dagger.expert_information,
-        max_iterations=dagger.iterations,
-        seed=seed,
-    )
-
-
-def _teacher(dagger: DaggerConfig) -> EnsemblePolicy | None:
-    """The ``expert_mode=gnn`` teacher (centralized, argmax), ``None`` for a routing expert."""
-    if dagger.expert_mode != "gnn":
-        return None
-    return EnsemblePolicy([load_model(path)[0] for path in dagger.teacher], centralized=True)
-
-
-def _sensor_range(env: CoverageEnv) -> float | None:
-    """The range sensor of an exploration env (transitions rebuild what the team discovered),
-    ``None`` in coverage."""
-    return env.config.sensor_range if env.config.task == "exploration" else None
-
-
 # ---------------------------------------------------------------------------- checkpoints
 def _phase(step: int, config: BCConfig) -> tuple[int, int]:
     """(phase, step within the phase): phase 0 is BC, phase k the training after round k."""
@@ -458,20 +210,6 @@ def _phase(step: int, config: BCConfig) -> tuple[int, int]:
         return 0, step
     offset = step - config.steps
     return 1 + offset // config.dagger.steps, offset % config.dagger.steps
-
-
-def reused_episodes(folders: list[str]) -> list[list[Episode]]:
-    """The labelled episodes of each ``dagger.reuse`` folder; a clear error for a folder that
-    is missing or holds no shards."""
-    reused = []
-    for folder in folders:
-        try:
-            reused.append(load_dataset(folder))
-        except FileNotFoundError:
-            raise FileNotFoundError(
-                f"dagger.reuse: {folder} holds no DAgger shards ({SHARD_PATTERN.format(0)}, ...)"
-            ) from None
-    return reused
 
 
 # ---------------------------------------------------------------------------- the loop
@@ -505,21 +243,22 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
 
     train, val = split_episodes(config)
     if config.ties:  # the expert's own trajectories show which other moves were as good
-        train, val = ([_with_ties(e) for e in part] for part in (train, val))
-    env = CoverageEnv(**config.env)
+        train, val = ([with_ties(e) for e in part] for part in (train, val))
+    env = CoverageEnv(**config.env.as_kwargs())
     max_nodes = max([e.graph.num_nodes for e in train + val] + [env.max_waypoints])
     dagger_shards = [out / "dagger" / SHARD_PATTERN.format(k) for k in range(config.dagger.rounds)]
     dagger_episodes = [read_shard(path) for path in dagger_shards if path.exists()]
     reused = reused_episodes(config.dagger.reuse)
     table = GraphTable([e.graph for e in train + val], max_nodes)
     # exploration: transitions carry what the team had discovered (same sensor as the env)
-    sensor = _sensor_range(env)
+    sensor = sensor_range_of(env)
     val_data = episode_transitions(val, max_nodes, first_index=len(train), sensor_range=sensor)
-    select_env = CoverageEnv(**{**config.env, **config.select_env}) if config.select_env else env
+    settings = config.env.as_kwargs()
+    select_env = CoverageEnv(**{**settings, **config.select_env}) if config.select_env else env
     # dagger.env: roll-outs on another map or team, their states collated apart
     apart = bool(config.dagger.env)
-    rollout_env = CoverageEnv(**{**config.env, **config.dagger.env}) if apart else env
-    rollout_steps, rollout_sensor = rollout_env.config.max_steps, _sensor_range(rollout_env)
+    rollout_env = CoverageEnv(**{**settings, **config.dagger.env}) if apart else env
+    rollout_steps, rollout_sensor = rollout_env.config.max_steps, sensor_range_of(rollout_env)
     own_table: GraphTable | None = None
     dagger_capacity = config.dagger.rounds * config.dagger.episodes * rollout_steps
     dagger_capacity += sum(e.num_steps for episodes in reused for e in episodes)
@@ -562,7 +301,7 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
 
     model = AggregationGNN(config.model)
     if config.init is not None:
-        start, _ = load_model(config.init)
+        start, _ = load_model(model_path(config.init))
         try:  # a block per hop or more width start from the init model's function
             start = start.grown_to(config.model, seed=config.seed)
         except ValueError:
@@ -620,7 +359,6 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
             env.config.max_steps,
             extra=extra,
             ties=config.ties,
-            temperature=config.temperature,
         )
         optimizer.zero_grad()
         loss.backward()

@@ -21,8 +21,8 @@ import numpy as np
 import torch
 from tensordict import TensorDict
 
-from agents.datasets import Episode
-from agents.models.gnn import with_time_feature
+from marl_cover.agents.models.logits import with_time_feature
+from marl_cover.agents.training.datasets import Episode
 from marl_cover.discovery import frontier_of
 from marl_cover.ego import NUM_ACTIONS, NUM_NODE_FEATURES
 from marl_cover.graph import SpatialGraph

@@ -1,13 +1,10 @@
-"""What every training run shares: its command line, its folder's config check and its TorchRL
-logger."""
+"""What every training run shares: its folder's config check and its TorchRL logger."""
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
-
-from agents.configuration import merge
 
 LOGGERS = ("csv", "tensorboard", "none")
 
@@ -32,11 +29,13 @@ def check_same_run(
         ValueError: another key differs; the message names the keys and the folder.
     """
     import yaml
+    from omegaconf import OmegaConf
 
     if not path.exists():
         return
     saved = yaml.safe_load(path.read_text()) or {}
-    previous = _flatten(merge(defaults or {}, saved))
+    merged = OmegaConf.merge(OmegaConf.create(defaults or {}), OmegaConf.create(saved))
+    previous = _flatten(OmegaConf.to_container(merged))  # type: ignore[arg-type]
     current = _flatten(yaml.safe_load(yaml.safe_dump(record)))  # as it reads back: tuples as lists
     skip = set(ignored)
     changed = sorted(
@@ -82,54 +81,3 @@ def make_logger(kind: str, out: Path) -> Any:
     from torchrl.record.loggers import CSVLogger
 
     return CSVLogger(exp_name="log", log_dir=str(out))
-
-
-def command_line(
-    argv: list[str],
-    doc: str,
-    config_class: type[Any],
-    default_config: Path,
-    train: Callable[[Any], dict[str, Any]],
-) -> None:
-    """A training script's ``main``: ``[--config YAML] key=value ...`` -> the typed config ->
-    ``train(config)`` -> its summary as JSON on stdout.
-
-    ``--help`` shows the script's docstring (its examples); ``--print-config`` prints the
-    settings a run would use, as YAML that ``--config`` reads back, and trains nothing. Bad
-    settings (an unknown key, a missing file, a bad value) exit with a one-line message that
-    names the script and the problem.
-    """
-    import argparse
-    import json
-    import logging
-    import sys
-
-    import yaml
-
-    from agents import configuration
-
-    parser = argparse.ArgumentParser(
-        description=doc, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
-    parser.add_argument("--config", default=str(default_config), help="YAML preset")
-    parser.add_argument(
-        "--print-config",
-        action="store_true",
-        help="print the resolved settings as YAML and exit without training",
-    )
-    parser.add_argument("overrides", nargs="*", help="key=value overrides")
-    args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.WARNING)
-    script = Path(sys.argv[0]).stem
-    try:
-        config = configuration.load(config_class, args.config, args.overrides)
-        if args.print_config:
-            print(yaml.safe_dump(configuration.as_dict(config), sort_keys=False), end="")
-            return
-        import torchrl  # noqa: F401 (configures its logger on import; quieten it after)
-
-        logging.getLogger("torchrl").setLevel(logging.WARNING)  # it logs buffer set-up to stdout
-        summary = train(config)
-    except (ValueError, FileNotFoundError) as error:
-        raise SystemExit(f"{script}: {error}") from error
-    print(json.dumps(summary, indent=2, default=str))

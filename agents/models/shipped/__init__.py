@@ -1,23 +1,76 @@
-"""Models shipped with the library, one per task, each with a JSON card beside it.
+"""The models shipped with the library, chosen by name, each with a model card beside it.
 
-The card (``<task>_gnn.json``) records the command, seed, dataset and scores that made the model.
+=================  ============  ==============================================================
+name               task          what it is
+=================  ============  ==============================================================
+``gnn``            coverage      the default: non-linear GNN, a block per hop, DAgger, averaged
+``gnn_linear``     coverage      the paper's linear GNN at width 32, DAgger
+``gnn_mappo``      coverage      the behaviour-cloned GNN fine-tuned by MAPPO
+``gnn_exploration``  exploration  the default for exploration: DAgger, then MAPPO, averaged
+``gnn_mission``    coverage      29 hops, for the quadrotor mission (DAgger, then MAPPO)
+=================  ============  ==============================================================
+
+``<name>.pt`` is the network (:func:`marl_cover.agents.models.checkpoints.load_model`);
+``<name>.json`` is its card: the commands that made it, its data and seeds, its test figures
+and the SHA-256 of the ``.pt``. Every intermediate model of those recipes is one command away
+(the card's ``recipe``), not shipped. Needs nothing but the standard library to look up.
 """
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
+from typing import Any
 
 SHIPPED = Path(__file__).resolve().parent
 
+#: Shipped model name -> the task it was trained for.
+SHIPPED_MODELS: dict[str, str] = {
+    "gnn": "coverage",
+    "gnn_linear": "coverage",
+    "gnn_mappo": "coverage",
+    "gnn_exploration": "exploration",
+    "gnn_mission": "coverage",
+}
+#: The model ``policy=gnn`` runs when no model is named, by task.
+DEFAULT_MODELS: dict[str, str] = {"coverage": "gnn", "exploration": "gnn_exploration"}
 
-def shipped_model_path(task: str = "coverage") -> Path:
-    """The shipped model file of ``task``.
+
+def default_model(task: str = "coverage") -> str:
+    """The name of the default model of ``task``.
 
     Raises:
-        FileNotFoundError: no model is shipped for ``task``, naming the tasks that have one.
+        ValueError: an unknown task, naming the tasks.
     """
-    path = SHIPPED / f"{task}_gnn.pt"
-    if not path.is_file():
-        available = sorted(p.name.removesuffix("_gnn.pt") for p in SHIPPED.glob("*_gnn.pt"))
-        raise FileNotFoundError(f"no shipped model for task {task!r}; shipped: {available}")
-    return path
+    if task not in DEFAULT_MODELS:
+        raise ValueError(f"no shipped model for task {task!r}; tasks: {sorted(DEFAULT_MODELS)}")
+    return DEFAULT_MODELS[task]
+
+
+def model_path(name: str | Path) -> Path:
+    """The file of a shipped model name, or ``name`` itself when it is a model file.
+
+    Raises:
+        FileNotFoundError: ``name`` is neither a shipped name nor a file, naming both the
+            shipped names and the path looked at.
+    """
+    if str(name) in SHIPPED_MODELS:
+        return SHIPPED / f"{name}.pt"
+    path = Path(name)
+    if path.is_file():
+        return path
+    raise FileNotFoundError(
+        f"no model file at {path} and no shipped model of that name; shipped models: "
+        f"{sorted(SHIPPED_MODELS)} (docs/models.md: the command that makes any other)"
+    )
+
+
+def model_card(name: str) -> dict[str, Any]:
+    """The card of a shipped model (its JSON file, as a dict).
+
+    Raises:
+        KeyError: ``name`` is not a shipped model, naming the shipped ones.
+    """
+    if name not in SHIPPED_MODELS:
+        raise KeyError(f"no shipped model {name!r}; shipped models: {sorted(SHIPPED_MODELS)}")
+    return json.loads((SHIPPED / f"{name}.json").read_text())

@@ -1,0 +1,1 @@
+"""The quadrotor mission: discrete policies flying robots with dynamics (:mod:`.flight`)."""
