@@ -1,6 +1,6 @@
 """Compiled kernels of the continuous-time mode (optional: needs numba): the bodies
 (:meth:`marl_cover.dynamics.QuadrotorTeam.advance`), the lattice lookup of
-:class:`marl_cover.continuous.WaypointLocator` and the near-miss count.
+:class:`marl_cover.locator.WaypointLocator` and the near-miss count.
 
 Each runs the same arithmetic, in the same order, as the numpy implementation, which stays the
 reference (``tests/test_dynamics.py`` checks that both give the same bits). A control period of

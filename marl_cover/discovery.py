@@ -15,7 +15,7 @@ discovery order (the order of ``state()`` in exploration). Functions of the whol
 (:func:`known_neighbors`, :func:`frontier_of`) rebuild the same things from scratch, for
 recorded episodes and for checks.
 
-Deviations from the paper's code (``shared/docs/reference_impl.md`` §1.11): a robot discovers
+Deviations from the paper's code (Tolstaya et al.'s published code): a robot discovers
 its own waypoint (the paper's test was ``0 < dist <= 22``, harmless there only because a robot's
 start was discovered by another robot or never observed), and undiscovered waypoints and their
 edges are absent from observations, not zero rows with half-masked edges (the paper's phantom

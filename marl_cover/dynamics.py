@@ -42,7 +42,7 @@ class QuadrotorParams:
     Defaults: a ~0.7 kg quadrotor of the AscTec Hummingbird class (the airframe of the
     simulator the paper flew; mass with battery 0.71 kg) with a 20 degree tilt limit
     (horizontal acceleration ``g * tan(20 deg) = 3.6 m/s^2``), linear rotor drag 0.25 N s/m, and
-    the 2 m/s speed cap of the paper's AirSim controller (``reference_impl.md`` 6.2).
+    the 2 m/s speed cap of the paper's AirSim controller .
 
     Attributes:
         mass: Mass in kg.

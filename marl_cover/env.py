@@ -59,19 +59,9 @@ centralized critic needs to value a state of a fixed-length episode).
 Arguments: the fields of :class:`marl_cover.config.CoverageConfig`; ``max_cycles`` is accepted
 as PettingZoo's name for ``max_steps``.
 
-Deviations from the paper's code (Tolstaya et al.; see ``shared/docs/reference_impl.md``):
-
-- An episode has exactly ``max_steps`` actions (the paper's code gave ``max_steps - 1``).
-- Actions are geometric slots with an explicit stay action, available at every waypoint; the
-  paper used the k-th neighbour by node index, padded with repeated stays, so a robot could not
-  wait at a waypoint of degree 4.
-- The collision resolver never lets two robots share a waypoint (the paper's could); see
-  :mod:`marl_cover.collisions`. Swaps are allowed by default, as in the paper.
-- Each robot observes its K-hop ego-graph instead of the whole map; robots are also linked to
-  their own waypoint (the stay edge). Edge features are lengths in cells for every edge.
-- Every random choice comes from one ``numpy`` generator seeded by ``reset(seed=...)``.
-- A masked-out action is a no-op counted in ``infos`` (``invalid_action="raise"`` makes it an
-  error). Start waypoints are marked visited at reset without reward, as in the paper.
+Deviations from the paper's code (exact episode length, explicit stay action, a resolver that
+never lets two robots share a waypoint, ego-graphs instead of the whole map, one seeded
+generator, counted no-ops for masked actions) are listed in ``docs/environment.md``.
 
 Version history: v0, first release.
 """
@@ -83,7 +73,6 @@ import dataclasses
 import functools
 import numbers
 import warnings
-from dataclasses import dataclass
 from typing import Any
 
 import gymnasium
@@ -91,9 +80,10 @@ import numpy as np
 from pettingzoo import ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec
 
+from marl_cover.actions import read_actions
 from marl_cover.collisions import resolve_collisions
 from marl_cover.config import CoverageConfig
-from marl_cover.discovery import Discovery, frontier_of, known_neighbors, sensor_footprints
+from marl_cover.discovery import Discovery, sensor_footprints
 from marl_cover.ego import (
     NUM_ACTIONS,
     StateBuilder,
@@ -105,89 +95,13 @@ from marl_cover.ego import (
     state_shape,
     waypoint_features,
 )
+from marl_cover.generator import draw_interest, draw_starts
 from marl_cover.graph import SpatialGraph
 from marl_cover.sources import make_map_source
-
-#: What ``step`` returns: observations, rewards, terminations, truncations, infos by agent.
-StepResult = tuple[
-    dict[str, dict[str, np.ndarray]],
-    dict[str, float],
-    dict[str, bool],
-    dict[str, bool],
-    dict[str, dict[str, Any]],
-]
+from marl_cover.types import CoverageSnapshot, Moves, StepResult
 
 #: Options ``reset`` understands.
 RESET_OPTIONS = ("robot_nodes", "interest_nodes")
-
-
-@dataclass(frozen=True)
-class Moves:
-    """What one step did (:meth:`CoverageEnv.apply_actions`).
-
-    Attributes:
-        new_interest: Points of interest each robot visited first this step, ``(R,)`` int64.
-        blocked: Robots the collision resolver kept from their target, ``(R,)`` bool.
-        invalid: Robots whose action was masked out (a no-op), ``(R,)`` bool.
-        terminated: Every point of interest has been visited.
-        truncated: The episode has used its ``max_steps`` actions and is not terminated.
-    """
-
-    new_interest: np.ndarray
-    blocked: np.ndarray
-    invalid: np.ndarray
-    terminated: bool
-    truncated: bool
-
-
-@dataclass(frozen=True)
-class CoverageSnapshot:
-    """A read-only copy of the environment's state, for planners and experts.
-
-    Attributes:
-        graph: The map of this episode.
-        robot_node: Waypoint of each robot, ``(num_robots,)`` int64.
-        interest: Points of interest of this episode, ``(num_nodes,)`` bool.
-        visited: Waypoints visited so far, ``(num_nodes,)`` bool.
-        num_steps: Actions taken so far.
-        max_steps: Actions per episode.
-        hops: Ego-graph radius.
-        discovered: Waypoints known to the team, ``(num_nodes,)`` bool (all of them in
-            coverage).
-    """
-
-    graph: SpatialGraph
-    robot_node: np.ndarray
-    interest: np.ndarray
-    visited: np.ndarray
-    num_steps: int
-    max_steps: int
-    hops: int
-    discovered: np.ndarray
-
-    @property
-    def unvisited_interest(self) -> np.ndarray:
-        """Points of interest not visited yet, ``(num_nodes,)`` bool."""
-        return self.interest & ~self.visited
-
-    @property
-    def frontier(self) -> np.ndarray:
-        """Discovered waypoints with an undiscovered neighbour, ``(num_nodes,)`` bool."""
-        return frontier_of(self.graph, self.discovered)
-
-    def known(self) -> CoverageSnapshot:
-        """The snapshot as the team knows it (what a fair planner may use): the known graph,
-        where undiscovered waypoints keep their indices but have no edges, and the points of
-        interest among the discovered waypoints."""
-        if self.discovered.all():
-            return self
-        graph = SpatialGraph(
-            self.graph.positions,
-            known_neighbors(self.graph, self.discovered),
-            self.graph.cell_size,
-            self.graph.cells,
-        )
-        return dataclasses.replace(self, graph=graph, interest=self.interest & self.discovered)
 
 
 class CoverageEnv(ParallelEnv):
@@ -329,8 +243,12 @@ class CoverageEnv(ParallelEnv):
             self._graph = graph
             self._state_builder = StateBuilder(graph, self.config.num_robots, self._state_shape)
             self._footprint = self._sensor_footprints(graph)
-        self._interest = self._draw_interest(graph, rng, options.get("interest_nodes"))
-        self._robot_node = self._draw_starts(graph, rng, options.get("robot_nodes"))
+        config = self.config
+        given_interest, given_starts = options.get("interest_nodes"), options.get("robot_nodes")
+        self._interest = draw_interest(graph, rng, config.interest_fraction, given_interest)
+        self._robot_node = draw_starts(
+            graph, rng, config.num_robots, config.start_density, given_starts
+        )
         self._visited = np.zeros(graph.num_nodes, dtype=bool)
         self._visited[self._robot_node] = True
         self._waypoint_features = waypoint_features(self._interest & ~self._visited)
@@ -360,45 +278,6 @@ class CoverageEnv(ParallelEnv):
             return
         changed = self._discovery.sense(self._robot_node)
         self._waypoint_features[changed, 3] = self._discovery.frontier[changed]
-
-    def _draw_interest(
-        self, graph: SpatialGraph, rng: np.random.Generator, given: Any
-    ) -> np.ndarray:
-        interest = np.zeros(graph.num_nodes, dtype=bool)
-        if given is not None:
-            nodes = self._check_nodes(graph, given, "interest_nodes")
-        else:
-            count = int(self.config.interest_fraction * graph.num_nodes)
-            nodes = rng.choice(graph.num_nodes, size=count, replace=False)
-        interest[nodes] = True
-        return interest
-
-    def _draw_starts(self, graph: SpatialGraph, rng: np.random.Generator, given: Any) -> np.ndarray:
-        r = self.config.num_robots
-        if given is not None:
-            nodes = self._check_nodes(graph, given, "robot_nodes")
-            if len(nodes) != r or len(np.unique(nodes)) != r:
-                raise ValueError(
-                    f"options['robot_nodes'] must hold {r} distinct waypoints, got {given}"
-                )
-            return nodes
-        if graph.num_nodes < r:
-            raise ValueError(f"{r} robots do not fit on a map of {graph.num_nodes} waypoints")
-        centre = int(rng.integers(graph.num_nodes))
-        ball = graph.bfs_ball(centre, self.config.start_density * r)
-        if len(ball) < r:
-            raise ValueError(
-                f"the component around waypoint {centre} has {len(ball)} waypoints, fewer than "
-                f"the {r} robots"
-            )
-        return rng.choice(ball, size=r, replace=False).astype(np.int64)
-
-    @staticmethod
-    def _check_nodes(graph: SpatialGraph, given: Any, key: str) -> np.ndarray:
-        nodes = np.asarray(given, dtype=np.int64).reshape(-1)
-        if len(nodes) and (nodes.min() < 0 or nodes.max() >= graph.num_nodes):
-            raise ValueError(f"options[{key!r}] holds a waypoint outside [0, {graph.num_nodes})")
-        return nodes
 
     def step(self, actions: dict[str, Any]) -> StepResult:
         """Moves every robot one step.
@@ -468,21 +347,7 @@ class CoverageEnv(ParallelEnv):
     def _read_actions(self, actions: dict[str, Any]) -> np.ndarray:
         if not self.agents:
             raise RuntimeError("step() called with no live agents; call reset() first")
-        unknown = [a for a in actions if a not in self._agent_indices]
-        if unknown:
-            raise ValueError(
-                f"actions given for unknown agents {unknown}; the agents are {self.possible_agents}"
-            )
-        missing = [a for a in self.agents if a not in actions]
-        if missing:
-            raise ValueError(f"no action given for {missing}")
-        action = np.empty(len(self.possible_agents), dtype=np.int64)
-        for agent, i in self._agent_indices.items():
-            value = actions[agent]
-            if not _is_action(value):
-                raise ValueError(f"action of {agent} must be an integer in [0, 5), got {value!r}")
-            action[i] = int(value)
-        return action
+        return read_actions(actions, self.agents, self.possible_agents)
 
     def _targets(self, action: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Target waypoint of each robot, and which actions were masked out (and become stays)."""
@@ -675,17 +540,6 @@ class CoverageEnv(ParallelEnv):
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
-
-
-def _is_action(value: Any) -> bool:
-    """Whether ``value`` is an integer action in ``[0, NUM_ACTIONS)`` (integral floats count)."""
-    if isinstance(value, (bool, np.bool_, str, bytes)) or np.ndim(value) != 0:
-        return False
-    try:
-        number = float(value)  # Python and numpy numbers, 0-d arrays and tensors
-    except (TypeError, ValueError):
-        return False
-    return number.is_integer() and 0 <= number < NUM_ACTIONS
 
 
 def _config_kwargs(kwargs: dict[str, Any]) -> dict[str, Any]:

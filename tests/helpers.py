@@ -30,7 +30,7 @@ def random_grid_graph(
     return graph_from_occupancy(occupied, cell_size=5.0)
 
 
-def run_cli(command: str, *args: str) -> subprocess.CompletedProcess:
+def run_cli(command: str, *args: str, cwd: Path = ROOT) -> subprocess.CompletedProcess:
     """``marl-cover <command> <args>`` from the repository root, run in this process.
 
     The command line's entry runs (argument parsing and exit codes included) without a new
@@ -44,7 +44,7 @@ def run_cli(command: str, *args: str) -> subprocess.CompletedProcess:
     """
     from marl_cover.agents.cli.main import main
 
-    return _in_process(["marl-cover", command, *args], lambda: main([command, *args]))
+    return _in_process(["marl-cover", command, *args], lambda: main([command, *args]), cwd)
 
 
 def run_script(script: str, *args: str) -> subprocess.CompletedProcess:
@@ -56,12 +56,14 @@ def run_script(script: str, *args: str) -> subprocess.CompletedProcess:
     )
 
 
-def _in_process(argv: list[str], call: Callable[[], object]) -> subprocess.CompletedProcess:
+def _in_process(
+    argv: list[str], call: Callable[[], object], cwd: Path = ROOT
+) -> subprocess.CompletedProcess:
     stdout, stderr = io.StringIO(), io.StringIO()
     saved_argv, saved_cwd, saved_path = sys.argv, os.getcwd(), list(sys.path)
     code = 0
     try:
-        os.chdir(ROOT)
+        os.chdir(cwd)
         sys.argv = [argv[1] if argv[0] == sys.executable else argv[0], *argv[2:]]
         with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
             try:

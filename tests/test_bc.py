@@ -14,10 +14,10 @@ from helpers import run_cli  # noqa: E402
 
 from marl_cover.agents.baselines.greedy import CentralizedGreedyPolicy  # noqa: E402
 from marl_cover.agents.cli import options as configuration  # noqa: E402
-from marl_cover.agents.models import AggregationGNN, GNNConfig, centralized_logits  # noqa: E402
+from marl_cover.agents.models import AggregationGNN, GNNConfig  # noqa: E402
 from marl_cover.agents.models.actors import EgoGraphLogits, make_actor  # noqa: E402
 from marl_cover.agents.models.checkpoints import average_models, load_model, save_model  # noqa: E402
-from marl_cover.agents.models.logits import action_logits  # noqa: E402
+from marl_cover.agents.models.logits import action_logits, centralized_logits  # noqa: E402
 from marl_cover.agents.models.policy import GNNPolicy  # noqa: E402
 from marl_cover.agents.training.bc import BCConfig, DaggerConfig, train_bc, validate  # noqa: E402
 from marl_cover.agents.training.data import GraphTable, collate_states, episode_transitions  # noqa: E402

@@ -12,8 +12,9 @@ from helpers import random_grid_graph
 from pettingzoo.test import parallel_api_test, parallel_seed_test
 
 import marl_cover
-from marl_cover.continuous import DynamicsConfig, QuadrotorCoverageEnv, WaypointLocator
+from marl_cover.continuous import DynamicsConfig, QuadrotorCoverageEnv
 from marl_cover.dynamics import QuadrotorParams, QuadrotorTeam
+from marl_cover.locator import WaypointLocator
 
 
 def fly(params: QuadrotorParams, target: np.ndarray, seconds: float, **team_kwargs) -> dict:

@@ -11,13 +11,9 @@ import marl_cover
 
 torch = pytest.importorskip("torch")
 
-from marl_cover.agents.models import (  # noqa: E402
-    AggregationGNN,
-    GNNConfig,
-    centralized_logits,
-    decentralized_logits,
-)
+from marl_cover.agents.models import AggregationGNN, GNNConfig  # noqa: E402
 from marl_cover.agents.models.checkpoints import load_model, save_model  # noqa: E402
+from marl_cover.agents.models.logits import centralized_logits, decentralized_logits  # noqa: E402
 
 
 def tensors(arrays: dict[str, np.ndarray]) -> dict[str, torch.Tensor]:

@@ -1,53 +1,49 @@
-"""The README's Python snippets are the front door: they run as written, in order, and do what
-the text beside them says."""
+"""The README is the front door: its first lines give the two commands, it stays short, and
+every command of its results table is a valid ``marl-cover`` command line. (Its code blocks run
+in ``test_docs.py``.)"""
 
 from __future__ import annotations
 
 import re
-from pathlib import Path
+import shlex
 
-import numpy as np
 import pytest
+from helpers import ROOT, run_cli
 
-README = Path(__file__).resolve().parent.parent / "README.md"
-
-
-def python_blocks() -> list[str]:
-    return re.findall(r"```python\n(.*?)```", README.read_text(), flags=re.S)
+README = (ROOT / "README.md").read_text()
 
 
-def test_readme_has_the_usage_snippets() -> None:
-    blocks = python_blocks()
-    assert len(blocks) == 3
-    assert blocks[0].startswith("import marl_cover\n")
+def test_the_first_lines_give_the_two_commands() -> None:
+    head = "\n".join(README.splitlines()[:8])
+    assert "`make demo`" in head and "`make test`" in head
+    assert len(README.splitlines()) <= 220
 
 
-@pytest.mark.usefixtures("paper_map_available")
-def test_readme_snippets_run() -> None:
-    blocks = python_blocks()
-    namespace: dict = {}
-    exec(compile(blocks[0], "README.md (usage)", "exec"), namespace)
-    env = namespace["env"]  # the last one made: 100 robots on the 5659-waypoint map
-    assert env.config.map == "paper_large" and len(env.possible_agents) == 100
-    assert env.max_waypoints == 5659
-    observations, rewards = namespace["observations"], namespace["rewards"]
-    assert sorted(observations) == sorted(rewards) == sorted(env.possible_agents)
-    for observation in observations.values():
-        assert observation["action_mask"].shape == (5,) and observation["action_mask"][0] == 1
-    assert namespace["state"]["robot_nodes"].shape == (100,)
-    assert set(rewards.values()) == {0}  # everyone stayed: nothing new visited
+def results_rows() -> list[list[str]]:
+    section = README.split("## Results", 1)[1].split("\n## ", 1)[0]
+    rows = [
+        [cell.strip() for cell in line.strip().strip("|").split("|")]
+        for line in section.splitlines()
+        if line.startswith("| ")
+    ]
+    assert [cell.strip() for cell in rows[0]] == ["task", "method", "ours", "paper", "command"]
+    return rows[2:]
 
-    exec(compile(blocks[1], "README.md (exploration)", "exec"), namespace)
-    env = namespace["env"]
-    assert env.config.task == "exploration" and env.config.sensor_range == 22.0
-    env.reset(seed=0)
-    discovered = env.snapshot().discovered
-    assert 0 < discovered.sum() < len(discovered)  # the sensor saw part of the window
 
-    exec(compile(blocks[2], "README.md (quadrotors)", "exec"), namespace)
-    env = namespace["env"]
-    observations, _ = env.reset(seed=0)
-    assert len(observations) == 10 and env.max_waypoints == 1266
-    _, rewards, *_ = env.step({agent: 0 for agent in env.agents})
-    assert env.time > 0 and np.isfinite(env.positions).all()
-    assert sorted(rewards) == sorted(env.possible_agents)
+def test_the_results_table_has_a_command_on_every_row() -> None:
+    rows = results_rows()
+    assert len(rows) >= 12
+    for row in rows:
+        assert re.search(r"`marl-cover [a-z-]+", row[4]), row
+
+
+@pytest.mark.parametrize("row", range(16))
+def test_every_command_of_the_results_table_parses(row: int) -> None:
+    pytest.importorskip("torch")
+    rows = results_rows()
+    if row >= len(rows):
+        pytest.skip("fewer rows")
+    for command in re.findall(r"`(marl-cover [^`]+)`", rows[row][4]):
+        name, *args = shlex.split(command)[1:]
+        done = run_cli(name, *args, "--print-config")
+        assert done.returncode == 0, f"{command}: {done.stderr[-1000:]}"

@@ -39,3 +39,14 @@ def test_code_passes_ruff(command: list[str]) -> None:
         timeout=300,
     )
     assert result.returncode == 0, result.stdout + result.stderr
+
+
+def test_no_module_is_a_wall_of_code() -> None:
+    """Small modules with one job each: none of the packages' modules exceeds 600 lines."""
+    long = {
+        str(path.relative_to(ROOT)): count
+        for folder in ("marl_cover", "agents", "scripts")
+        for path in (ROOT / folder).rglob("*.py")
+        if (count := len(path.read_text().splitlines())) > 600
+    }
+    assert not long, long

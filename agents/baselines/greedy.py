@@ -62,7 +62,7 @@ def _distance_to_interest(
 
 
 class _GreedyBase:
-    def __init__(self, hops: int, fallback: str = "stay", seed: int | None = None) -> None:
+    def __init__(self, hops: int = 19, fallback: str = "stay", seed: int | None = None) -> None:
         if hops < 1:
             raise ValueError(f"hops must be >= 1, got {hops}")
         if fallback not in FALLBACKS:
@@ -107,8 +107,8 @@ class GreedyPolicy(_GreedyBase):
     """Decentralized greedy: each robot decides from its own ego-observation.
 
     Args:
-        hops: Horizon K; only points of interest within K hops count (at most the env's
-            ``hops``, which bounds what an ego-graph shows).
+        hops: Horizon K (default 19, the paper's); only points of interest within K hops count (at
+            most the env's ``hops``, which bounds what an ego-graph shows).
         fallback: ``"stay"`` or ``"random"`` when nothing is within reach.
         seed: Seed of the generator of ``fallback="random"``.
     """

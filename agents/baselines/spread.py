@@ -8,9 +8,9 @@ takes the best-scoring move unless another candidate leads strictly farther from
 teammate, and then the highest-scoring of the farthest candidates. A robot with no teammate in
 view, or a single candidate, keeps its argmax; a masked action is never a candidate.
 
-The GNN's losses concentrate in a few decisions where robots crowd one region
-(``docs/results/exploration.md``, session 34); this rule spreads the team only where the network
-itself rates the moves about equal. Measured in ``docs/results/mission.md`` (session 36).
+The GNN's losses concentrate in a few decisions where robots crowd one region; this rule spreads
+the team only where the network itself rates the moves about equal (its figures: the results
+page of the documentation).
 """
 
 from __future__ import annotations

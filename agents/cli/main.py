@@ -37,6 +37,20 @@ COMMANDS: dict[str, tuple[str, str]] = {
 }
 
 
+#: Optional package -> the extra that installs it.
+EXTRAS = {
+    "torch": "train",
+    "torchrl": "train",
+    "tensordict": "train",
+    "pyvrp": "expert",
+    "ortools": "expert",
+    "matplotlib": "render",
+    "networkx": "render",
+    "PIL": "render",
+    "numba": "fast",
+}
+
+
 def usage() -> str:
     """The top-level help: the subcommands, one line each."""
     width = max(map(len, COMMANDS))
@@ -64,8 +78,16 @@ def main(argv: Sequence[str] | None = None) -> None:
     name, rest = args[0], args[1:]
     if name not in COMMANDS:
         raise SystemExit(f"marl-cover: unknown command {name!r}; commands: {', '.join(COMMANDS)}")
-    module = importlib.import_module(f"marl_cover.agents.cli.{COMMANDS[name][0]}")
-    module.main(rest, prog=f"marl-cover {name}")
+    try:
+        module = importlib.import_module(f"marl_cover.agents.cli.{COMMANDS[name][0]}")
+        module.main(rest, prog=f"marl-cover {name}")
+    except ModuleNotFoundError as error:  # an optional package the command needs
+        top = (error.name or "").split(".")[0]
+        if top not in EXTRAS:
+            raise
+        raise SystemExit(
+            f"marl-cover {name} needs {top}: pip install 'marl-cover[{EXTRAS[top]}]'"
+        ) from None
 
 
 if __name__ == "__main__":

@@ -199,7 +199,7 @@ def run_mission(
 
 @dataclass
 class MissionConfig:
-    """The quadrotor mission (defaults: the paper's, ``reference_impl.md`` 6.1).
+    """The quadrotor mission (defaults: the paper's, the paper's).
 
     Attributes:
         map: Map preset or grid file (the paper's 1266-waypoint graph).

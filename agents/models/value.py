@@ -6,7 +6,7 @@ every step) is that robot's value:
 
 - :class:`StateValue` (MAPPO): one pass over the whole-graph ``state`` gives every robot's
   value, ``(..., R, 1)``; ``aggregate="sum"`` gives the paper's team value ``sum_r v_r``
-  (``reference_impl.md`` section 3) at every robot instead.
+  (the paper's code) at every robot instead.
 - :class:`EgoValue` (IPPO): each robot's value from its own ego-graph, ``(..., 1)``.
 """
 

@@ -24,7 +24,8 @@ whole state. Here a robot plans with nothing but its observation:
 Teammates plan the same way on their own views, at the same time, without communicating: the
 policy is as decentralized as the GNN. The robot's world model is wrong where its view ends
 (teammates beyond it, the map beyond it, in exploration the undiscovered map), and in its
-world it has the collision resolver's first priority (results: docs/results.md).
+world it has the collision resolver's first priority (its figures: the results page of the
+documentation).
 """
 
 from __future__ import annotations

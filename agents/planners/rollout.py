@@ -14,11 +14,10 @@ the move whose play-out returns most:
 - ``sequential=False`` (every robot against the base policy's joint action): each robot's best
   single deviation, all evaluated in one batch: each robot's best response to a team that
   plays the base policy, as labels for a decentralized learner. Their combination has no
-  guarantee (and a GNN trained on them got worse: ``docs/results/exploration.md``, session 34).
+  guarantee (and a GNN trained on them got worse: the "what we tried" page of the docs).
 
 The rollout policy reads the whole state and plays the future out: it is an omniscient planner,
-as the routing experts are, and a teacher for DAgger (``scripts/collect_rollout_labels.py``
-labels a learner's own states with it). All play-outs of a decision run in lockstep, so a
+as the routing experts are. All play-outs of a decision run in lockstep, so a
 network base decides for all of them in one batched pass (:class:`GNNArgmax`).
 """
 

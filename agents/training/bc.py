@@ -1,6 +1,6 @@
 """Behaviour cloning of the routing expert, with DAgger as an option.
 
-The recipe (defaults: the paper's, ``reference_impl.md`` section 4.2, except that every recorded
+The recipe (defaults: the paper's, the paper's code, except that every recorded
 episode is used instead of the first 200):
 
 1. Load the expert dataset; drop the episodes whose seeds are held out for evaluation

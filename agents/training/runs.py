@@ -20,7 +20,7 @@ def check_same_run(
     Args:
         path: The run's saved config (nothing to check if it does not exist yet).
         record: The new run's config as plain dicts.
-        ignored: Keys that may change between sessions (progress bars, lengths): top-level
+        ignored: Keys that may change between the legs of a run (progress bars, lengths): top-level
             names, or ``section.key`` for one key of a section.
         defaults: The config's default values as plain dicts: a key that the saved config
             lacks (a run made before the key existed) reads as its default.
