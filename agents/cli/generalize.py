@@ -30,6 +30,7 @@ from marl_cover.agents.baselines.greedy import GreedyPolicy
 from marl_cover.agents.cli.options import parse
 from marl_cover.agents.evaluation.episodes import evaluate
 from marl_cover.agents.evaluation.paper import paper_numbers
+from marl_cover.agents.evaluation.plots import plot_beside_paper
 from marl_cover.agents.io import file_sha256, read_result, write_text_atomic
 from marl_cover.config import TASKS, require
 
@@ -124,30 +125,20 @@ def table(records: dict, paper: dict) -> None:
 
 def plot(records: dict, paper: dict, path: Path, task: str) -> None:
     """Mean +- SEM against team size, ours (solid) and the paper's (dashed)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(6.5, 4.2), dpi=120)
-    for colour, method in zip("br", ("greedy", "gnn"), strict=True):
-        ours = sorted((k[1], r["mean"], r["sem"]) for k, r in records.items() if k[0] == method)
-        if ours:
-            x, y, e = zip(*ours, strict=True)
-            ax.errorbar(x, y, yerr=e, fmt="o-", color=colour, capsize=3, label=f"{method}, ours")
-        ref = sorted((k[1], *v) for k, v in paper.items() if k[0] == PAPER_METHODS[method])
-        if ref:
-            x, y, e = zip(*ref, strict=True)
-            label = f"{PAPER_METHODS[method]}, paper"
-            ax.errorbar(x, y, yerr=e, fmt="^--", color=colour, alpha=0.5, capsize=3, label=label)
-    ax.set_xlabel("robots")
-    ax.set_ylabel("points of interest visited in 50 steps (mean +- SEM)")
-    ax.set_title(f"{task.capitalize()} on the 5659-waypoint map, K = 19")
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    plt.close(fig)
+    curves = {
+        method: (
+            [(k[1], r["mean"], r["sem"]) for k, r in records.items() if k[0] == method],
+            [(k[1], *v) for k, v in paper.items() if k[0] == PAPER_METHODS[method]],
+        )
+        for method in ("greedy", "gnn")
+    }
+    plot_beside_paper(
+        curves,
+        path,
+        "robots",
+        "points of interest visited in 50 steps (mean +- SEM)",
+        f"{task.capitalize()} on the 5659-waypoint map, K = 19",
+    )
 
 
 def run(config: GeneralizeConfig) -> None:

@@ -28,6 +28,7 @@ from marl_cover.agents.baselines.greedy import GreedyPolicy
 from marl_cover.agents.cli.options import parse
 from marl_cover.agents.evaluation.episodes import evaluate
 from marl_cover.agents.evaluation.paper import paper_numbers
+from marl_cover.agents.evaluation.plots import plot_beside_paper
 from marl_cover.agents.io import write_text_atomic
 from marl_cover.config import TASKS, require
 
@@ -146,35 +147,25 @@ def print_table(records: list[dict], task: str) -> None:
 
 def plot(records: list[dict], path: Path, task: str) -> None:
     """Mean +- SEM against K, ours (solid) and the paper's (dashed)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     paper = paper_numbers(task)
-    fig, ax = plt.subplots(figsize=(7, 4.5), dpi=120)
-    for colour, (method, (paper_name, lengths)) in zip("brgm", METHODS.items(), strict=False):
-        points = sorted(
-            (r["hops"], r[f"T{lengths[0]}"]["mean"], r[f"T{lengths[0]}"]["sem"])
-            for r in records
-            if r["method"] == method
+    curves = {
+        method: (
+            [
+                (r["hops"], r[f"T{lengths[0]}"]["mean"], r[f"T{lengths[0]}"]["sem"])
+                for r in records
+                if r["method"] == method
+            ],
+            [(k, *v) for (m, k), v in paper.items() if m == paper_name],
         )
-        if points:
-            x, y, e = zip(*points, strict=True)
-            ax.errorbar(x, y, yerr=e, fmt="o-", color=colour, capsize=3, label=f"{method}, ours")
-        ref = sorted((k, *v) for (m, k), v in paper.items() if m == paper_name)
-        if ref:
-            x, y, e = zip(*ref, strict=True)
-            label = f"{method}, paper"
-            ax.errorbar(x, y, yerr=e, fmt="^--", color=colour, alpha=0.5, capsize=3, label=label)
-    ax.set_xlabel("receptive field / horizon K")
-    ax.set_ylabel("episode reward (mean +- SEM)")
-    ax.set_title(f"{task.capitalize()}, 4 robots, windows of the paper's map, T = 50")
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    plt.close(fig)
+        for method, (paper_name, lengths) in METHODS.items()
+    }
+    plot_beside_paper(
+        curves,
+        path,
+        "receptive field / horizon K",
+        "episode reward (mean +- SEM)",
+        f"{task.capitalize()}, 4 robots, windows of the paper's map, T = 50",
+    )
 
 
 def run(config: ReproduceConfig) -> None:
