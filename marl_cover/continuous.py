@@ -58,6 +58,7 @@ from marl_cover.dynamics import (
 )
 from marl_cover.ego import action_targets
 from marl_cover.env import CoverageEnv, StepResult, _config_kwargs
+from marl_cover.graph import SpatialGraph
 from marl_cover.locator import WaypointLocator
 
 RETARGET_MODES = ("arrival", "rate")
@@ -253,6 +254,16 @@ class QuadrotorCoverageEnv(CoverageEnv):
         return self._near_misses
 
     # ------------------------------------------------------------------ episode
+    def _check_map(self, graph: SpatialGraph) -> None:
+        """The default ``visit_radius`` (half the cell size) must cover the arrival radius."""
+        super()._check_map(graph)
+        d = self.dynamics
+        if d.visit_radius is None and 0.5 * graph.cell_size < d.arrival_radius:
+            raise ValueError(
+                f"arrival_radius {d.arrival_radius} m exceeds half the map's cell size "
+                f"({0.5 * graph.cell_size} m), the default visit_radius"
+            )
+
     def reset(
         self, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, dict[str, np.ndarray]], dict[str, dict[str, Any]]]:
@@ -263,11 +274,6 @@ class QuadrotorCoverageEnv(CoverageEnv):
         self._visit_radius = d.visit_radius
         if self._visit_radius is None:
             self._visit_radius = 0.5 * graph.cell_size
-            if self._visit_radius < d.arrival_radius:
-                raise ValueError(
-                    f"arrival_radius {d.arrival_radius} m exceeds half the map's cell size "
-                    f"({self._visit_radius} m), the default visit_radius"
-                )
         r = self.config.num_robots
         self._altitude = np.linspace(*d.altitude_range, r)  # (R,)
         start = np.column_stack([graph.positions[self._robot_node], self._altitude])

@@ -104,6 +104,19 @@ from marl_cover.types import CoverageSnapshot, Moves, StepResult
 RESET_OPTIONS = ("robot_nodes", "interest_nodes")
 
 
+@dataclasses.dataclass(frozen=True)
+class _EpisodeDraw:
+    """What :meth:`CoverageEnv.reset` draws before it changes anything."""
+
+    rng: np.random.Generator
+    graph: SpatialGraph
+    state_builder: StateBuilder | None
+    footprint: Any
+    interest: np.ndarray  # (num_nodes,) bool
+    robot_node: np.ndarray  # (num_robots,) int64
+    discovery: Discovery | None
+
+
 class CoverageEnv(ParallelEnv):
     """The coverage environment; see the module docstring for its spaces and rules."""
 
@@ -229,35 +242,67 @@ class CoverageEnv(ParallelEnv):
 
     def _start_episode(self, seed: int | None, options: dict[str, Any] | None) -> None:
         """The draws and the episode state of :meth:`reset`, without building observations
-        (subclasses that extend the state observe once, after their own part)."""
-        if seed is not None and not (isinstance(seed, numbers.Integral) and seed >= 0):
-            raise ValueError(f"seed must be a non-negative integer or None, got {seed!r}")
-        if seed is not None or self._rng is None:
-            self._rng = np.random.default_rng(seed)
-        rng = self._rng
-        options = dict(options or {})
-        for key in sorted(set(options) - set(RESET_OPTIONS)):
-            warnings.warn(f"reset ignores unknown option {key!r}", stacklevel=3)
-        graph = self._map_source.sample(rng)
-        if graph is not self._graph:
-            self._graph = graph
-            self._state_builder = StateBuilder(graph, self.config.num_robots, self._state_shape)
-            self._footprint = self._sensor_footprints(graph)
-        config = self.config
-        given_interest, given_starts = options.get("interest_nodes"), options.get("robot_nodes")
-        self._interest = draw_interest(graph, rng, config.interest_fraction, given_interest)
-        self._robot_node = draw_starts(
-            graph, rng, config.num_robots, config.start_density, given_starts
-        )
-        self._visited = np.zeros(graph.num_nodes, dtype=bool)
+        (subclasses that extend the state observe once, after their own part).
+
+        All or nothing: the episode is drawn and checked first (:meth:`_draw_episode`), and
+        only then replaces the environment's state, so a reset that raises leaves the
+        environment, its generator included, exactly as it was.
+        """
+        draw = self._draw_episode(seed, options)
+        self._rng = draw.rng
+        if draw.graph is not self._graph:
+            self._graph = draw.graph
+            self._state_builder = draw.state_builder
+            self._footprint = draw.footprint
+        self._interest = draw.interest
+        self._robot_node = draw.robot_node
+        self._visited = np.zeros(draw.graph.num_nodes, dtype=bool)
         self._visited[self._robot_node] = True
         self._waypoint_features = waypoint_features(self._interest & ~self._visited)
-        self._discovery = None if self._footprint is None else Discovery(graph, self._footprint)
+        self._discovery = draw.discovery
         self._sense()
         self._num_steps = 0
         self._credits = np.zeros(self.config.num_robots, dtype=np.int64)
         self._trails: list[np.ndarray] = [self._robot_node.copy()]
         self.agents = self.possible_agents[:]
+
+    def _draw_episode(self, seed: int | None, options: dict[str, Any] | None) -> _EpisodeDraw:
+        """The random draws of the next episode, checked, on a copy of the generator: nothing
+        of the environment changes here.
+
+        Raises:
+            ValueError: a bad seed or option (naming it), or a drawn map the environment
+                cannot use.
+        """
+        if seed is not None and not (isinstance(seed, numbers.Integral) and seed >= 0):
+            raise ValueError(f"seed must be a non-negative integer or None, got {seed!r}")
+        options = dict(options or {})
+        for key in sorted(set(options) - set(RESET_OPTIONS)):
+            warnings.warn(f"reset ignores unknown option {key!r}", stacklevel=4)
+        fresh = seed is not None or self._rng is None
+        rng = np.random.default_rng(seed) if fresh else copy.deepcopy(self._rng)
+        graph = self._map_source.sample(rng)
+        state_builder, footprint = self._state_builder, self._footprint
+        if graph is not self._graph:
+            self._check_map(graph)
+            state_builder = StateBuilder(graph, self.config.num_robots, self._state_shape)
+            footprint = self._sensor_footprints(graph)
+        config = self.config
+        interest = draw_interest(
+            graph, rng, config.interest_fraction, options.get("interest_nodes")
+        )
+        robot_node = draw_starts(
+            graph, rng, config.num_robots, config.start_density, options.get("robot_nodes")
+        )
+        discovery = None if footprint is None else Discovery(graph, footprint)
+        return _EpisodeDraw(rng, graph, state_builder, footprint, interest, robot_node, discovery)
+
+    def _check_map(self, graph: SpatialGraph) -> None:
+        """Checks a newly drawn map before an episode starts on it (subclasses add theirs).
+
+        Raises:
+            ValueError: the map cannot host an episode of this environment.
+        """
 
     def _sensor_footprints(self, graph: SpatialGraph) -> Any:
         """Exploration: what a robot on each waypoint senses (``None`` in coverage)."""

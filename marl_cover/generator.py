@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from marl_cover.errors import as_node_indices
 from marl_cover.graph import SpatialGraph
 
 
@@ -64,9 +65,15 @@ def check_nodes(graph: SpatialGraph, given: Any, key: str) -> np.ndarray:
     """``given`` as waypoint indices ``(n,)`` int64.
 
     Raises:
-        ValueError: an index outside the map, naming the option ``key``.
+        ValueError: an entry that is not an integer, or an index outside the map, naming the
+            option ``key`` and the entry.
     """
-    nodes = np.asarray(given, dtype=np.int64).reshape(-1)
-    if len(nodes) and (nodes.min() < 0 or nodes.max() >= graph.num_nodes):
-        raise ValueError(f"options[{key!r}] holds a waypoint outside [0, {graph.num_nodes})")
+    nodes = as_node_indices(given, f"options[{key!r}]")
+    outside = np.flatnonzero((nodes < 0) | (nodes >= graph.num_nodes))
+    if len(outside):
+        i = int(outside[0])
+        raise ValueError(
+            f"options[{key!r}] holds a waypoint outside [0, {graph.num_nodes}): "
+            f"entry {i} is {nodes[i]}"
+        )
     return nodes

@@ -19,6 +19,8 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components, dijkstra
 
+from marl_cover.errors import as_node_indices, check_finite
+
 #: Names of the four neighbour slots, in action order (action ``k`` moves to slot ``k - 1``).
 SLOT_NAMES = ("east", "north", "west", "south")
 NUM_SLOTS = 4
@@ -38,6 +40,11 @@ class SpatialGraph:
         cell_size: Lattice spacing in metres; edge features are distances divided by it.
         cells: ``(row, col)`` grid cell of each waypoint, ``(num_nodes, 2)`` int64, or ``None``
             for graphs not built from a grid.
+
+    Raises:
+        ValueError: on construction, naming the argument: positions not ``(num_nodes, 2)`` or
+            not finite (the first bad waypoint), indices that are not integers (the first bad
+            entry) or outside ``[-1, num_nodes)``, or a non-positive or non-finite cell size.
     """
 
     positions: np.ndarray  # (num_nodes, 2) float64
@@ -47,9 +54,11 @@ class SpatialGraph:
 
     def __post_init__(self) -> None:
         positions = np.asarray(self.positions, dtype=np.float64)
-        neighbors = np.asarray(self.neighbors, dtype=np.int64)
+        given = np.asarray(self.neighbors)
+        neighbors = as_node_indices(given, "neighbors").reshape(given.shape)
         if positions.ndim != 2 or positions.shape[1] != 2:
             raise ValueError(f"positions must have shape (num_nodes, 2), got {positions.shape}")
+        check_finite(positions, "positions")
         if neighbors.shape != (positions.shape[0], NUM_SLOTS):
             raise ValueError(
                 f"neighbors must have shape ({positions.shape[0]}, {NUM_SLOTS}), "
@@ -59,12 +68,14 @@ class SpatialGraph:
             raise ValueError("a SpatialGraph needs at least one waypoint")
         if neighbors.min() < -1 or neighbors.max() >= positions.shape[0]:
             raise ValueError("neighbors holds an index outside [-1, num_nodes)")
-        if self.cell_size <= 0:
-            raise ValueError(f"cell_size must be positive, got {self.cell_size}")
+        if not (np.isfinite(self.cell_size) and self.cell_size > 0):
+            raise ValueError(f"cell_size must be positive and finite, got {self.cell_size}")
         object.__setattr__(self, "positions", positions)
         object.__setattr__(self, "neighbors", neighbors)
         if self.cells is not None:
-            object.__setattr__(self, "cells", np.asarray(self.cells, dtype=np.int64))
+            cells = np.asarray(self.cells)
+            cells = as_node_indices(cells, "cells").reshape(cells.shape)
+            object.__setattr__(self, "cells", cells)
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -84,14 +95,16 @@ class SpatialGraph:
             cell_size: Lattice spacing in metres.
 
         Raises:
-            ValueError: ``positions`` is not ``(num_nodes, 2)``, an edge names a node outside
-                ``[0, num_nodes)``, is a self-loop or is listed twice, or two neighbours of one
-                node fall into the same direction slot.
+            ValueError: ``positions`` is not ``(num_nodes, 2)`` or not finite, ``edges`` holds
+                a non-integer, an edge names a node outside ``[0, num_nodes)``, is a self-loop
+                or is listed twice, or two neighbours of one node fall into the same direction
+                slot.
         """
         positions = np.asarray(positions, dtype=np.float64)
-        edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+        edges = as_node_indices(edges, "edges").reshape(-1, 2)
         if positions.ndim != 2 or positions.shape[1] != 2:
             raise ValueError(f"positions must have shape (num_nodes, 2), got {positions.shape}")
+        check_finite(positions, "positions")
         num_nodes = positions.shape[0]
         outside = (edges < 0) | (edges >= num_nodes)
         if outside.any():

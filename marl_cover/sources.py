@@ -125,7 +125,8 @@ def make_map_source(config: CoverageConfig) -> MapSource:
     Raises:
         FileNotFoundError: the map file (or the paper's map) is missing, naming the path.
         ValueError: the maps are too small for the team, ``map`` is not understood, or a given
-            ``graph``'s neighbour table is not symmetric.
+            ``graph``'s neighbour table is not symmetric or it has a component smaller than
+            the team.
     """
     source: MapSource
     if config.graph is not None:
@@ -156,4 +157,26 @@ def make_map_source(config: CoverageConfig) -> MapSource:
     smallest = config.min_window_nodes if isinstance(source, WindowMap) else source.max_waypoints
     if smallest < config.num_robots:
         raise ValueError(f"{config.num_robots} robots do not fit on maps of {smallest} waypoints")
+    if isinstance(source, FixedMap):
+        check_components(source.graph, config.num_robots)
     return source
+
+
+def check_components(graph: SpatialGraph, num_robots: int) -> None:
+    """Checks that every connected component of ``graph`` can hold the team: a reset starts
+    the team around a random waypoint, within its component.
+
+    Raises:
+        ValueError: naming the smallest component's size, a waypoint in it, and the team's.
+    """
+    labels = graph.component_labels()
+    sizes = np.bincount(labels)  # (num_components,)
+    smallest = int(np.argmin(sizes))
+    if sizes[smallest] < num_robots:
+        waypoint = int(np.flatnonzero(labels == smallest)[0])
+        raise ValueError(
+            f"the graph has a connected component of {sizes[smallest]} waypoints (waypoint "
+            f"{waypoint} is in it), smaller than the team of {num_robots} robots: a reset "
+            "that starts the team there would fail; keep graph.largest_component() or "
+            "use fewer robots"
+        )
