@@ -14,6 +14,8 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
+from marl_cover.errors import BadFileError, MissingFileError
+
 
 def progress_bar(
     desc: str, unit: str = "episode", leave: bool = True
@@ -49,6 +51,24 @@ def write_text_atomic(path: str | Path, text: str) -> Path:
     return write_bytes_atomic(path, text.encode("utf-8"))
 
 
+def read_json(path: str | Path) -> Any:
+    """The JSON document in a file.
+
+    Raises:
+        MissingFileError: no file at ``path``.
+        BadFileError: the file is not UTF-8 JSON, naming it, the line and the column.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise MissingFileError(path, "no such file")
+    try:
+        return json.loads(path.read_bytes().decode("utf-8"))
+    except UnicodeDecodeError as error:
+        raise BadFileError(path, f"not UTF-8 text ({error})") from None
+    except json.JSONDecodeError as error:
+        raise BadFileError(path, f"not JSON ({error})") from None
+
+
 def file_sha256(path: str | Path) -> str:
     """The SHA-256 of a file's bytes (names a model file by its content, not its path)."""
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
@@ -60,18 +80,22 @@ def read_result(path: str | Path, setup: dict[str, Any]) -> dict[str, Any]:
     A file that records no setup (written before setups were recorded) is reused with a note.
 
     Raises:
-        ValueError: the file was made under another setup, naming it and the keys that differ.
+        BadFileError: the file is not a JSON object, or was made under another setup, naming
+            it and the keys that differ.
     """
     path = Path(path)
-    result = json.loads(path.read_text())
+    result = read_json(path)
+    if not isinstance(result, dict):
+        raise BadFileError(path, "not a result (a JSON object)")
     recorded = result.get("setup")
     setup = json.loads(json.dumps(setup))  # as it reads back (lists, not tuples)
     if recorded is None:
         print(f"note: {path} does not record its setup; reused as it is", flush=True)
     elif recorded != setup:
         differ = sorted(k for k in set(recorded) | set(setup) if recorded.get(k) != setup.get(k))
-        raise ValueError(
-            f"{path} was made under another setup (differs in {differ}); "
-            "delete it or choose another output folder"
+        raise BadFileError(
+            path,
+            f"made under another setup (differs in {differ}); "
+            "delete it or choose another output folder",
         )
     return result

@@ -84,7 +84,7 @@ def test_windows_play_their_average_and_resume_from_the_cache(tmp_path, monkeypa
     again, best_again = select_window(tmp_path / "run", [3, 1, 2], ENV, seeds, tmp_path / "cache")
     assert [r.rewards for r in again] == [r.rewards for r in results]
     assert best_again.steps == best.steps
-    with pytest.raises(ValueError, match=r"window_001000_003000.json was made under another setup"):
+    with pytest.raises(ValueError, match=r"window_001000_003000.json: made under another setup"):
         select_window(tmp_path / "run", [3], ENV, [5, 6], tmp_path / "cache")
 
 

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import json
+import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -19,6 +22,7 @@ from marl_cover.agents.training.datasets import (
     record_episode,
     write_shard,
 )
+from marl_cover.errors import BadFileError, MissingFileError
 
 pytest.importorskip("pyvrp")
 ROOT = Path(__file__).resolve().parent.parent
@@ -110,10 +114,82 @@ def test_recorded_episode_replays_exactly(tmp_path) -> None:
 def test_bad_shard_is_named(tmp_path) -> None:
     bad = tmp_path / "shard_00000.npz"
     bad.write_bytes(b"not a shard")
-    with pytest.raises(ValueError, match="shard_00000.npz"):
+    with pytest.raises(BadFileError, match=r"shard_00000.npz: not a whole dataset shard"):
         load_dataset(tmp_path)
-    with pytest.raises(FileNotFoundError, match="no dataset shards"):
+    with pytest.raises(MissingFileError, match="no dataset shards"):
         load_dataset(tmp_path / "empty")
+
+
+def open_descriptors() -> int:
+    return len(os.listdir("/proc/self/fd"))
+
+
+def corrupt(path: Path, how: str) -> None:
+    """Truncates the file, or flips one byte of its compressed data."""
+    data = bytearray(path.read_bytes())
+    if how == "truncated":
+        path.write_bytes(bytes(data[: len(data) // 2]))
+    else:
+        data[len(data) // 3] ^= 0x5A
+        path.write_bytes(bytes(data))
+
+
+@pytest.fixture(scope="module")
+def clean_dataset(tmp_path_factory) -> Path:
+    """Five episodes in three shards, collected once for the corruption tests."""
+    out = tmp_path_factory.mktemp("clean") / "data"
+    done = collect(out)
+    assert done.returncode == 0, done.stderr
+    return out
+
+
+def copy_dataset(source: Path, target: Path) -> Path:
+    shutil.copytree(source, target)
+    return target
+
+
+@pytest.mark.skipif(not Path("/proc/self/fd").is_dir(), reason="counts /proc/self/fd (Linux)")
+@pytest.mark.parametrize("how", ["truncated", "bit-flipped"])
+def test_corrupted_shard_is_named_and_closed(clean_dataset, tmp_path, how: str) -> None:
+    data = copy_dataset(clean_dataset, tmp_path / "data")
+    shard = data / "shard_00001.npz"
+    corrupt(shard, how)
+    before = open_descriptors()
+    # without the manifest's digest, reading it whole still fails (zip structure or CRC)
+    with pytest.raises(BadFileError, match=r"shard_00001.npz: not a whole dataset shard"):
+        read_shard(shard)
+    # with the manifest, its digest names the expected and the found
+    manifest = json.loads((data / "manifest.json").read_text())
+    expected = manifest["shards"]["shard_00001.npz"]["sha256"]
+    with pytest.raises(
+        BadFileError, match=rf"shard_00001.npz: SHA-256 is \w+, the manifest records {expected}"
+    ):
+        load_dataset(data)
+    assert open_descriptors() == before
+    with pytest.warns(UserWarning, match="skipped a bad shard: .*shard_00001.npz"):
+        kept = load_dataset(data, bad_shards="skip")
+    assert [e.seed for e in kept] == [0, 1, 4]
+
+
+def test_resume_recollects_exactly_the_bad_shard(clean_dataset, tmp_path) -> None:
+    data = copy_dataset(clean_dataset, tmp_path / "data")
+    corrupt(data / "shard_00001.npz", "bit-flipped")
+    refused = collect(data, "bad_shards=raise")
+    assert refused.returncode != 0
+    assert "shard_00001.npz: SHA-256 is" in refused.stderr
+    redone = collect(data)
+    assert redone.returncode == 0, redone.stderr
+    assert "shard_00001.npz: SHA-256 is" in redone.stdout
+    assert "3 shards, 1 to collect" in redone.stdout
+    for name in ("manifest.json", "shard_00000.npz", "shard_00001.npz", "shard_00002.npz"):
+        assert (data / name).read_bytes() == (clean_dataset / name).read_bytes(), name
+    # a shard written but never recorded (killed before the manifest) is collected again
+    manifest = json.loads((data / "manifest.json").read_text())
+    del manifest["shards"]["shard_00002.npz"]
+    (data / "manifest.json").write_text(json.dumps(manifest))
+    redone = collect(data)
+    assert "shard_00002.npz: not in the manifest" in redone.stdout
+    assert (data / "manifest.json").read_bytes() == (clean_dataset / "manifest.json").read_bytes()
 
 
 class _CentralGreedy:

@@ -34,7 +34,7 @@ def test_read_result_checks_the_setup(tmp_path: Path, capsys: pytest.CaptureFixt
     path.write_text(json.dumps({"mean": 1.5, "setup": setup}))
     assert read_result(path, setup)["mean"] == 1.5  # a tuple reads back as a list: same setup
     with pytest.raises(
-        ValueError, match=r"gnn_R10.json was made under another setup .*\['robots'\]"
+        ValueError, match=r"gnn_R10.json: made under another setup .*\['robots'\]"
     ):
         read_result(path, {**setup, "robots": 20})
     with pytest.raises(ValueError, match=r"differs in \['model_sha256'\]"):

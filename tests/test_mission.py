@@ -188,7 +188,7 @@ def test_run_mission_script(tmp_path: Path) -> None:
     other = args + ["model=gnn_mappo"]
     refused = run_cli("mission", *other)
     assert refused.returncode != 0 and "Traceback" not in refused.stderr
-    assert "gnn_0.json was made under another setup" in refused.stderr
+    assert "gnn_0.json: made under another setup" in refused.stderr
     assert "model_sha256" in refused.stderr
     # A bad override ends the script with one line naming it, before anything flies.
     bad = run_cli("mission", *args, "seeds=ten")

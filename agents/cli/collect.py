@@ -1,9 +1,12 @@
 """Collect expert episodes into a compact, resumable dataset of shards.
 
-Shard ``k`` holds the episodes with seeds ``seed + k * shard_size ...``; shards already on disk
-are skipped, so running the same command again after an interrupt finishes the dataset with no
-episode lost or repeated. Each shard is written atomically, and the dataset's settings are kept
-in ``out/meta.json`` (a resume with other settings is refused). Load the episodes with
+Shard ``k`` holds the episodes with seeds ``seed + k * shard_size ...``. Each shard is written
+atomically and recorded in ``out/manifest.json`` with its SHA-256, beside the dataset's
+settings (a resume with other settings is refused). Running the same command again after an
+interrupt keeps the shards that match the manifest and collects the rest; a shard that is
+corrupted, truncated or unrecorded is named and re-collected (``bad_shards=recollect``) or
+stops the run (``bad_shards=raise``). Episodes are seeded by their own seeds, so a re-collected
+shard is the same file. Load the episodes with
 ``marl_cover.agents.training.datasets.load_dataset(out)``.
 
 Example (the dataset behind the shipped models, about 10 minutes on two cores)::
@@ -13,7 +16,6 @@ Example (the dataset behind the shipped models, about 10 minutes on two cores)::
 
 from __future__ import annotations
 
-import json
 import sys
 import time
 from collections.abc import Iterable, Sequence
@@ -24,12 +26,17 @@ from typing import Any
 
 from marl_cover import EnvSettings, parallel_env
 from marl_cover.agents.cli.options import parse
-from marl_cover.agents.io import progress_bar, write_text_atomic
-from marl_cover.agents.training.datasets import SHARD_PATTERN, record_episode, write_shard
+from marl_cover.agents.io import progress_bar
+from marl_cover.agents.training.datasets import (
+    SHARD_PATTERN,
+    ShardManifest,
+    record_episode,
+    write_shard,
+)
 from marl_cover.config import require
 
-#: Settings that may change between the legs of one dataset.
-RESUMABLE = ("workers", "max_shards")
+#: Settings that may change between the legs of one dataset (a dataset may be moved).
+RESUMABLE = ("out", "workers", "max_shards", "bad_shards")
 
 
 @dataclass
@@ -65,6 +72,7 @@ class CollectConfig:
     workers: int = 2  # worker processes
     out: str = "data/coverage_expert"  # the dataset's folder
     max_shards: int = -1  # stop after writing this many new shards (-1: all)
+    bad_shards: str = "recollect"  # a bad shard on resume: recollect or raise
     env: EnvSettings = field(default_factory=lambda: EnvSettings(map="paper"))
     expert: CollectExpert = field(default_factory=CollectExpert)
 
@@ -75,11 +83,15 @@ class CollectConfig:
                 "episodes, shard_size and workers must be >= 1",
             ),
             (self.seed >= 0, f"seed must be >= 0, got {self.seed}"),
+            (
+                self.bad_shards in ("recollect", "raise"),
+                f"bad_shards must be recollect or raise, got {self.bad_shards!r}",
+            ),
         )
 
 
-def collect_shard(job: tuple[int, list[int], dict[str, Any]]) -> tuple[int, int, float]:
-    """Records and writes one shard; returns (shard, episodes, seconds)."""
+def collect_shard(job: tuple[int, list[int], dict[str, Any]]) -> tuple[int, str, float]:
+    """Records and writes one shard; returns (shard, its SHA-256, seconds)."""
     from marl_cover.agents.experts import RoutingExpert
 
     shard, seeds, config = job
@@ -94,28 +106,54 @@ def collect_shard(job: tuple[int, list[int], dict[str, Any]]) -> tuple[int, int,
         max_iterations=expert["iterations"] or None,
     )
     episodes = [record_episode(env, policy, seed) for seed in seeds]
-    write_shard(Path(config["out"]) / SHARD_PATTERN.format(shard), episodes)
-    return shard, len(episodes), time.perf_counter() - start
+    digest = write_shard(Path(config["out"]) / SHARD_PATTERN.format(shard), episodes)
+    return shard, digest, time.perf_counter() - start
 
 
-def check_resume(out: Path, settings: dict[str, Any]) -> None:
-    """Writes ``out/meta.json``, or refuses a dataset made with other settings.
+def open_manifest(out: Path, settings: dict[str, Any]) -> ShardManifest:
+    """The dataset's manifest, new or resumed; a new one records ``settings``.
 
     Raises:
         SystemExit: ``out`` holds a dataset of other settings, naming the keys that differ.
     """
-    meta_path = out / "meta.json"
-    if not meta_path.exists():
-        write_text_atomic(meta_path, json.dumps({"config": settings}, indent=2))
-        return
-    previous = json.loads(meta_path.read_text()).get("config", {})
+    manifest = ShardManifest(out)
+    if manifest.config is None:
+        manifest.config = settings
+        manifest.save()
+        return manifest
+    previous = manifest.config
     keys = (set(previous) | set(settings)) - set(RESUMABLE)
     differ = sorted(k for k in keys if previous.get(k) != settings.get(k))
     if differ:
         raise SystemExit(
-            f"{out} holds a dataset made with other settings ({differ} differ, {meta_path}); "
-            "use another out= or the same settings to resume"
+            f"{out} holds a dataset made with other settings ({differ} differ, "
+            f"{manifest.path}); use another out= or the same settings to resume"
         )
+    return manifest
+
+
+def shards_to_collect(manifest: ShardManifest, num_shards: int, bad_shards: str) -> list[int]:
+    """The shards that are not on disk whole: missing ones, and bad ones (named on stdout).
+
+    Raises:
+        SystemExit: a bad shard with ``bad_shards="raise"``, naming it and what is wrong.
+    """
+    todo = []
+    for shard in range(num_shards):
+        name = SHARD_PATTERN.format(shard)
+        problem = manifest.problem(name)
+        if problem is None:
+            continue
+        if problem != "missing":
+            if bad_shards == "raise":
+                raise SystemExit(
+                    f"{manifest.folder / name}: {problem}; run with bad_shards=recollect "
+                    "to collect it again"
+                )
+            print(f"{manifest.folder / name}: {problem}; collecting it again", flush=True)
+            manifest.shards.pop(name, None)
+        todo.append(shard)
+    return todo
 
 
 def run(config: CollectConfig) -> None:
@@ -123,14 +161,12 @@ def run(config: CollectConfig) -> None:
     out = Path(config.out)
     out.mkdir(parents=True, exist_ok=True)
     settings = asdict(config)
-    check_resume(out, settings)
+    manifest = open_manifest(out, settings)
     for stale in out.glob(".tmp_*"):  # left by a collection killed mid-write
         stale.unlink()
     num_shards = -(-config.episodes // config.shard_size)
     jobs = []
-    for shard in range(num_shards):
-        if (out / SHARD_PATTERN.format(shard)).exists():
-            continue
+    for shard in shards_to_collect(manifest, num_shards, config.bad_shards):
         first = config.seed + shard * config.shard_size
         last = min(config.seed + config.episodes, first + config.shard_size)
         jobs.append((shard, list(range(first, last)), settings))
@@ -139,13 +175,15 @@ def run(config: CollectConfig) -> None:
     done = num_shards - len(jobs) if config.max_shards < 0 else None
     print(f"{num_shards} shards, {len(jobs)} to collect, {config.workers} workers -> {out}")
     start = time.perf_counter()
-    results: Iterable[tuple[int, int, float]]
+    results: Iterable[tuple[int, str, float]]
     pool = get_context("spawn").Pool(config.workers) if config.workers > 1 else None
     results = map(collect_shard, jobs) if pool is None else pool.imap_unordered(collect_shard, jobs)
+    seeds = {shard: seeds for shard, seeds, _ in jobs}
     bar = progress_bar("collect", unit="shard")
-    for shard, count, seconds in bar(results, total=len(jobs)) if bar else results:
+    for shard, digest, seconds in bar(results, total=len(jobs)) if bar else results:
+        manifest.add(SHARD_PATTERN.format(shard), digest, seeds[shard])
         if bar is None:
-            print(f"shard {shard}: {count} episodes in {seconds:.1f} s", flush=True)
+            print(f"shard {shard}: {len(seeds[shard])} episodes in {seconds:.1f} s", flush=True)
     if pool is not None:
         pool.close()
         pool.join()

@@ -62,6 +62,7 @@ from marl_cover.agents.training.data import GraphTable, collate_states, episode_
 from marl_cover.agents.training.datasets import (
     SHARD_PATTERN,
     Episode,
+    ShardManifest,
     load_dataset,
     read_shard,
     write_shard,
@@ -75,10 +76,28 @@ logger = logging.getLogger(__name__)
 __all__ = ["BCConfig", "DaggerConfig", "train_bc"]
 
 
+def read_dagger_rounds(manifest: ShardManifest, rounds: int) -> list[list[Episode]]:
+    """The DAgger rounds a resumed run already played (their shards, checked against the
+    folder's manifest where it records them).
+
+    Raises:
+        BadFileError: a round's shard is corrupted, naming it (delete it to play the round
+            again).
+    """
+    played = []
+    for k in range(rounds):
+        path = manifest.folder / SHARD_PATTERN.format(k)
+        if path.exists():
+            digest = manifest.shards.get(path.name, {}).get("sha256")
+            played.append(read_shard(path, digest))
+    return played
+
+
 def split_episodes(config: BCConfig) -> tuple[list[Episode], list[Episode]]:
     """Train and validation episodes of the dataset (held-out seeds removed, split by episode)."""
     first, stop = config.holdout_seeds
-    episodes = [e for e in load_dataset(config.dataset) if not first <= e.seed < stop]
+    dataset = load_dataset(config.dataset, config.bad_shards)
+    episodes = [e for e in dataset if not first <= e.seed < stop]
     if config.max_episodes is not None:
         episodes = episodes[: config.max_episodes]
     if len(episodes) < 2:
@@ -246,8 +265,8 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
         train, val = ([with_ties(e) for e in part] for part in (train, val))
     env = CoverageEnv(**config.env.as_kwargs())
     max_nodes = max([e.graph.num_nodes for e in train + val] + [env.max_waypoints])
-    dagger_shards = [out / "dagger" / SHARD_PATTERN.format(k) for k in range(config.dagger.rounds)]
-    dagger_episodes = [read_shard(path) for path in dagger_shards if path.exists()]
+    dagger_manifest = ShardManifest(out / "dagger")
+    dagger_episodes = read_dagger_rounds(dagger_manifest, config.dagger.rounds)
     reused = reused_episodes(config.dagger.reuse)
     table = GraphTable([e.graph for e in train + val], max_nodes)
     # exploration: transitions carry what the team had discovered (same sensor as the env)
@@ -342,7 +361,9 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
         phase, phase_step = _phase(step, config)
         if phase > 0 and phase_step == 0 and len(dagger_episodes) < phase:
             episodes = dagger_round(model, rollout_env, config, phase - 1)
-            write_shard(out / "dagger" / SHARD_PATTERN.format(phase - 1), episodes)
+            name = SHARD_PATTERN.format(phase - 1)
+            digest = write_shard(dagger_manifest.folder / name, episodes)
+            dagger_manifest.add(name, digest, [e.seed for e in episodes])
             dagger_episodes.append(episodes)
             add_dagger(episodes)
             reward = float(np.mean([e.reward() for e in episodes]))

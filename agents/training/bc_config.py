@@ -103,6 +103,8 @@ class BCConfig:
 
     Attributes:
         dataset: Folder of the expert dataset (``marl-cover collect``).
+        bad_shards: A dataset shard that fails its checksum or cannot be read: ``"raise"``
+            (stop, naming it) or ``"skip"`` (train without it, with a warning naming it).
         out: The run's folder (re-run with the same one to resume).
         model: The network trained.
         init: Start from this model, a shipped name or a model file: its config must equal
@@ -135,6 +137,7 @@ class BCConfig:
     """
 
     dataset: str = "data/coverage_expert"
+    bad_shards: str = "raise"
     out: str = "outputs/bc/run"
     model: GNNConfig = field(default_factory=GNNConfig)
     init: str | None = None
@@ -185,6 +188,10 @@ class BCConfig:
             ),
             (self.seed >= 0 and self.select_seed >= 0, "seed and select_seed must be >= 0"),
             (self.threads >= 1, f"threads must be >= 1, got {self.threads}"),
+            (
+                self.bad_shards in ("raise", "skip"),
+                f"bad_shards must be raise or skip, got {self.bad_shards!r}",
+            ),
         )
 
     @property

@@ -10,25 +10,28 @@ rebuilt on demand with the environment's own ego-graph builder. About 6 kB per 2
 episode, where the paper stored 120 kB per step.
 
 Episodes are grouped in shards (``shard_00000.npz``...), each covering a fixed range of episode
-seeds, written to a temporary file and renamed, so an interrupted collection resumes by
-skipping the shards already on disk: no episode is lost or written twice.
+seeds, written to a temporary file and renamed; the folder's ``manifest.json`` records each
+shard's SHA-256. An interrupted collection resumes by keeping the shards that match the
+manifest and re-collecting the others: no episode is lost, written twice or half-read.
 """
 
 from __future__ import annotations
 
+import hashlib
 import io
 import json
-from collections.abc import Callable
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from marl_cover.agents.io import write_bytes_atomic, write_text_atomic
+from marl_cover.agents.io import file_sha256, read_json, write_bytes_atomic, write_text_atomic
 from marl_cover.discovery import discovery_steps, frontier_of, known_neighbors, sensor_footprints
 from marl_cover.ego import PaddedShape, build_ego_graphs, waypoint_features
 from marl_cover.env import CoverageEnv
+from marl_cover.errors import BadFileError, MissingFileError
 from marl_cover.graph import SpatialGraph
 
 SHARD_PATTERN = "shard_{:05d}.npz"
@@ -226,70 +229,130 @@ def trajectory_ties(episode: Episode) -> np.ndarray:
     return np.where(keep, bits, 1 << labels).astype(np.int8)
 
 
-def write_shard(path: Path, episodes: list[Episode]) -> None:
-    """Writes episodes to ``path`` atomically (a temporary file in the same folder, renamed)."""
-    buffer = io.BytesIO()
-    np.savez_compressed(buffer, **_pack(episodes))
-    write_bytes_atomic(path, buffer.getvalue())
-
-
-def read_shard(path: Path) -> list[Episode]:
-    """The episodes of one shard.
-
-    Raises:
-        ValueError: the file is not a shard, naming it.
-    """
-    try:
-        with np.load(path) as data:
-            return _unpack({k: data[k] for k in data.files})
-    except (OSError, KeyError, ValueError) as error:
-        raise ValueError(f"{path} is not a readable dataset shard: {error}") from error
-
-
-def load_dataset(folder: str | Path) -> list[Episode]:
-    """Every episode of a dataset folder, ordered by seed."""
-    folder = Path(folder)
-    shards = sorted(folder.glob("shard_*.npz"))
-    if not shards:
-        raise FileNotFoundError(f"no dataset shards (shard_*.npz) in {folder}")
-    episodes = [e for shard in shards for e in read_shard(shard)]
-    return sorted(episodes, key=lambda e: e.seed)
-
-
-def record_shards(
-    out: Path,
-    first_seed: int,
-    count: int,
-    shard_size: int,
-    record: Callable[[int], tuple[Episode, dict[str, Any]]],
-) -> list[dict[str, Any]]:
-    """Records ``count`` episodes, seeds ``first_seed...``, into resumable shards under ``out``.
-
-    Shard ``k`` holds the seeds ``first_seed + k * shard_size ...`` and is written atomically
-    with a ``.json`` of ``record``'s per-episode counts beside it; a shard whose two files are
-    both there is kept, so the same call after an interrupt records only what is missing.
-
-    Args:
-        out: The folder (it must exist).
-        first_seed: Seed of the first episode.
-        count: Episodes in all.
-        shard_size: Episodes per shard.
-        record: Plays and labels the episode of a seed: the episode and its counts.
+def write_shard(path: Path, episodes: list[Episode]) -> str:
+    """Writes episodes to ``path`` atomically (a temporary file in the same folder, renamed).
 
     Returns:
-        The counts of every episode, in seed order (those of kept shards read back).
+        The SHA-256 of the bytes written, for the dataset's :class:`ShardManifest`.
     """
-    rows: list[dict[str, Any]] = []
-    for shard in range(-(-count // shard_size)):
-        path = out / SHARD_PATTERN.format(shard)
-        stats_path = path.with_suffix(".json")
-        if path.exists() and stats_path.exists():
-            rows.extend(json.loads(stats_path.read_text()))
-            continue
-        first = first_seed + shard * shard_size
-        seeds = range(first, min(first + shard_size, first_seed + count))
-        recorded = [record(seed) for seed in seeds]
-        write_shard(path, [episode for episode, _ in recorded])
-        write_text_atomic(stats_path, json.dumps([counts for _, counts in recorded]))
-        rows.extend(counts for _, counts in recorded)
-    return rows
+    buffer = io.BytesIO()
+    np.savez_compressed(buffer, **_pack(episodes))
+    data = buffer.getvalue()
+    write_bytes_atomic(path, data)
+    return hashlib.sha256(data).hexdigest()
+
+
+def read_shard(path: Path, sha256: str | None = None) -> list[Episode]:
+    """The episodes of one shard, read whole (every array's CRC checked) or not at all.
+
+    Args:
+        path: The shard.
+        sha256: The digest the dataset's manifest records for it, checked first.
+
+    Raises:
+        MissingFileError: there is no file at ``path``.
+        BadFileError: the file is not a whole shard (truncated, corrupted, another kind of
+            file) or its digest is not ``sha256``, naming it and what is wrong.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise MissingFileError(path, "no dataset shard here")
+    if sha256 is not None:
+        found = file_sha256(path)
+        if found != sha256:
+            raise BadFileError(path, f"SHA-256 is {found}, the manifest records {sha256}")
+    try:
+        with open(path, "rb") as handle, np.load(handle, allow_pickle=False) as data:
+            return _unpack({k: data[k] for k in data.files})
+    except Exception as error:  # noqa: BLE001 (zip, zlib, numpy and shape errors alike)
+        raise BadFileError(
+            path, f"not a whole dataset shard ({type(error).__name__}: {error})"
+        ) from error
+
+
+class ShardManifest:
+    """A dataset folder's ``manifest.json``: each shard's SHA-256, seeds and episode count,
+    plus the settings the dataset was made with; rewritten atomically as shards are added.
+
+    Args:
+        folder: The dataset's folder.
+    """
+
+    FILE = "manifest.json"
+
+    def __init__(self, folder: str | Path) -> None:
+        self.folder = Path(folder)
+        self.path = self.folder / self.FILE
+        self.config: dict[str, Any] | None = None
+        self.shards: dict[str, dict[str, Any]] = {}
+        if self.path.exists():
+            record = read_json(self.path)
+            shards = record.get("shards") if isinstance(record, dict) else None
+            if not isinstance(shards, dict) or not all(
+                isinstance(v, dict) and isinstance(v.get("sha256"), str) for v in shards.values()
+            ):
+                raise BadFileError(self.path, "not a dataset manifest (no 'shards' with digests)")
+            self.config, self.shards = record.get("config"), shards
+
+    @property
+    def exists(self) -> bool:
+        """Whether the folder has a manifest on disk."""
+        return self.path.exists()
+
+    def save(self) -> None:
+        """Writes the manifest atomically."""
+        record = {"config": self.config, "shards": dict(sorted(self.shards.items()))}
+        write_text_atomic(self.path, json.dumps(record, indent=1))
+
+    def add(self, name: str, sha256: str, seeds: list[int]) -> None:
+        """Records the shard ``name`` and saves the manifest."""
+        self.shards[name] = {"sha256": sha256, "episodes": len(seeds), "seeds": seeds}
+        self.save()
+
+    def problem(self, name: str) -> str | None:
+        """What is wrong with the shard ``name`` on disk (``None``: it is whole and recorded)."""
+        path = self.folder / name
+        if not path.is_file():
+            return "missing"
+        if name not in self.shards:
+            return "not in the manifest (a collection stopped before recording it)"
+        found, expected = file_sha256(path), self.shards[name]["sha256"]
+        return None if found == expected else f"SHA-256 is {found}, the manifest has {expected}"
+
+
+def load_dataset(folder: str | Path, bad_shards: str = "raise") -> list[Episode]:
+    """Every episode of a dataset folder, ordered by seed.
+
+    Each shard is checked against the folder's manifest (its SHA-256) and read whole. A
+    folder without a manifest is read shard by shard, each array's CRC checked.
+
+    Args:
+        folder: The dataset's folder.
+        bad_shards: ``"raise"``: a bad shard is an error; ``"skip"``: it is left out with a
+            warning naming it (``marl-cover collect`` with the same settings re-collects it).
+
+    Raises:
+        MissingFileError: no shards in ``folder``.
+        BadFileError: a shard listed in the manifest is missing, fails its checksum or
+            cannot be read (with ``bad_shards="raise"``), or the manifest is unreadable.
+    """
+    if bad_shards not in ("raise", "skip"):
+        raise ValueError(f"bad_shards must be 'raise' or 'skip', got {bad_shards!r}")
+    folder = Path(folder)
+    manifest = ShardManifest(folder)
+    if manifest.exists:
+        names = sorted(manifest.shards)
+    else:
+        names = sorted(p.name for p in folder.glob("shard_*.npz"))
+    if not names:
+        raise MissingFileError(folder, "no dataset shards (shard_*.npz) in this folder")
+    episodes = []
+    for name in names:
+        digest = manifest.shards[name]["sha256"] if manifest.exists else None
+        try:
+            episodes.extend(read_shard(folder / name, digest))
+        except BadFileError as error:
+            if bad_shards == "raise":
+                raise
+            warnings.warn(f"skipped a bad shard: {error}", stacklevel=2)
+    return sorted(episodes, key=lambda e: e.seed)
