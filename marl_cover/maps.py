@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
+from marl_cover.errors import BadFileError, MissingFileError
 from marl_cover.graph import SpatialGraph
 from marl_cover.paper_map import paper_map_path
 
@@ -33,23 +34,28 @@ def load_occupancy(path: str | os.PathLike[str]) -> np.ndarray:
     Pillow reads) are converted to grey levels; dark pixels (< 128) are occupied.
 
     Raises:
-        FileNotFoundError: the file does not exist.
-        ValueError: the file is not a 2-D grid, naming the file.
+        MissingFileError: the file does not exist.
+        BadFileError: the file is not a readable 2-D grid, naming the file and the problem.
     """
     path = Path(path)
     if not path.is_file():
-        raise FileNotFoundError(f"occupancy grid not found: {path}")
-    if path.suffix.lower() == ".npy":
-        try:
-            grid = np.load(path, allow_pickle=False)
-        except (ValueError, OSError) as error:  # not an .npy array file
-            raise ValueError(f"{path}: not a numpy grid ({error})") from None
-    else:
-        from PIL import Image
+        raise MissingFileError(path, "occupancy grid not found")
+    try:
+        if path.suffix.lower() == ".npy":
+            with open(path, "rb") as handle:
+                grid = np.load(handle, allow_pickle=False)
+        else:
+            from PIL import Image
 
-        with Image.open(path) as image:
-            grid = np.asarray(image.convert("L")) < 128
-    return as_occupancy(grid, str(path))
+            with Image.open(path) as image:
+                grid = np.asarray(image.convert("L")) < 128
+        return as_occupancy(grid, "grid")
+    except ImportError:
+        raise
+    except Exception as error:  # noqa: BLE001 (numpy, zip and image errors alike)
+        kind = ".npy" if path.suffix.lower() == ".npy" else "image"
+        problem = " ".join(str(error).split())
+        raise BadFileError(path, f"not a readable {kind} occupancy grid ({problem})") from None
 
 
 def as_occupancy(grid: np.ndarray, name: str = "occupied") -> np.ndarray:

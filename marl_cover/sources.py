@@ -14,6 +14,7 @@ import numpy as np
 
 from marl_cover.city import CityConfig, generate_city
 from marl_cover.config import MAP_PRESETS, CoverageConfig
+from marl_cover.errors import BadFileError
 from marl_cover.graph import SpatialGraph
 from marl_cover.maps import (
     PAPER_LARGE_PERIMETER,
@@ -116,7 +117,7 @@ def _cached_grid_graph(path: str, cell_size: float, perimeter: float | None) -> 
     try:
         return graph_from_occupancy(occupied, cell_size, perimeter=perimeter)
     except ValueError as error:  # no usable free cell: say which file
-        raise ValueError(f"{path}: {error}") from error
+        raise BadFileError(path, str(error)) from error
 
 
 def make_map_source(config: CoverageConfig) -> MapSource:

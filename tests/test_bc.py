@@ -158,14 +158,14 @@ def test_model_files_round_trip_and_bad_files_are_named(tmp_path) -> None:
     for a, b in zip(loaded.state_dict().values(), model.state_dict().values(), strict=True):
         assert torch.equal(a, b)
     torch.save({"weights": 1}, tmp_path / "bad.pt")
-    with pytest.raises(ValueError, match="bad.pt is not a model file"):
+    with pytest.raises(ValueError, match="bad.pt: not a model file"):
         load_model(tmp_path / "bad.pt")
     with pytest.raises(FileNotFoundError, match="missing.pt"):
         load_model(tmp_path / "missing.pt")
     (tmp_path / "empty.pt").write_bytes(b"")
     (tmp_path / "notes.pt").write_text("# notes\n")
     for name, error in (("empty.pt", "EOFError"), ("notes.pt", "UnpicklingError")):
-        with pytest.raises(ValueError, match=rf"{name} is not a model file \({error}: "):
+        with pytest.raises(ValueError, match=rf"{name}: not a readable model file \({error}: "):
             load_model(tmp_path / name)
 
 

@@ -226,3 +226,12 @@ def test_collection_names_bad_settings_before_writing(tmp_path, argument, messag
     result = run_cli("collect", f"out={tmp_path / 'data'}", argument)
     assert result.returncode != 0 and message in result.stderr
     assert "Traceback" not in result.stderr and not (tmp_path / "data").exists()
+
+
+def test_training_names_the_bad_shard_in_one_line(clean_dataset, tmp_path) -> None:
+    data = copy_dataset(clean_dataset, tmp_path / "data")
+    corrupt(data / "shard_00002.npz", "truncated")
+    done = run_cli("train-bc", f"dataset={data}", f"out={tmp_path / 'bc'}", "env.map=city")
+    assert done.returncode != 0 and "Traceback" not in done.stderr
+    assert "shard_00002.npz: SHA-256 is" in done.stderr
+    assert "collects it again, bad_shards=skip leaves it out" in done.stderr

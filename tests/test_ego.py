@@ -135,7 +135,7 @@ def test_inspect_ego_script_draws_one_robots_view(tmp_path) -> None:
     for args, message in (
         (["seed=-1"], "seed and steps must be >= 0"),
         (["robot=4"], "robot must be in [0, 4), got 4"),
-        (["env.map=nowhere.npy"], "occupancy grid not found: nowhere.npy"),
+        (["env.map=nowhere.npy"], "nowhere.npy: occupancy grid not found"),
     ):
         refused = run_cli("inspect", *args, f"out={out}")
         assert refused.returncode != 0 and message in refused.stderr

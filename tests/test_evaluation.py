@@ -126,8 +126,8 @@ def test_cli_rejects_unknown_keys() -> None:
         ("seed=-3", "episodes must be >= 1 and seed >= 0"),
         ("policy=greedy model=gnn", "model= applies to the gnn policies, not policy=greedy"),
         ("policy=gnn --seed -1", "episodes must be >= 1 and seed >= 0"),
-        ("env.map=missing_grid.npy", "occupancy grid not found: missing_grid.npy"),
-        ("model=README.md policy=gnn", "README.md is not a model file (UnpicklingError"),
+        ("env.map=missing_grid.npy", "missing_grid.npy: occupancy grid not found"),
+        ("model=README.md policy=gnn", "README.md: not a readable model file (UnpicklingError"),
         ("model=missing.pt policy=gnn", "no model file at missing.pt"),
         ("policy=gnn_rollout gnn.deterministic=false", "do not apply to policy=gnn_rollout"),
         ("policy=gnn gnn.spread=0.5 gnn.centralized=true", "on the robots' ego-graphs"),
@@ -312,7 +312,7 @@ def test_compare_script_prints_and_writes_the_table(tmp_path: Path) -> None:
 
 
 def test_generalize_names_a_bad_model_file() -> None:
-    for path, message in (("no.pt", "no model file at no.pt"), ("README.md", "not a model file")):
+    for path, message in (("no.pt", "no model file at no.pt"), ("README.md", "README.md: not a readable model file")):
         result = run_cli("generalize", f"model={path}", "robots=[10]")
         assert result.returncode != 0 and message in result.stderr
         assert "Traceback" not in result.stderr

@@ -7,6 +7,7 @@ import pytest
 
 import marl_cover
 from marl_cover.city import CityConfig, generate_city
+from marl_cover.errors import BadFileError
 from marl_cover.graph import SpatialGraph
 from marl_cover.maps import (
     candidate_cells,
@@ -153,12 +154,12 @@ def test_load_occupancy_formats_and_errors(tmp_path) -> None:
     Image.fromarray(np.where(grid, 0, 255).astype(np.uint8)).save(tmp_path / "grid.png")
     assert (load_occupancy(tmp_path / "grid.png") == grid).all()
     np.save(tmp_path / "bad.npy", np.array([[0.5, 1.0]]))
-    with pytest.raises(ValueError, match="bad.npy"):
+    with pytest.raises(BadFileError, match=r"bad.npy: .*expected a boolean or 0/1 grid"):
         load_occupancy(tmp_path / "bad.npy")
     with pytest.raises(FileNotFoundError, match="missing.npy"):
         load_occupancy(tmp_path / "missing.npy")
     (tmp_path / "garbage.npy").write_bytes(b"not an array")
-    with pytest.raises(ValueError, match=r"garbage\.npy: not a numpy grid"):
+    with pytest.raises(ValueError, match=r"garbage\.npy: not a readable \.npy occupancy grid"):
         load_occupancy(tmp_path / "garbage.npy")
 
 

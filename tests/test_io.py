@@ -33,9 +33,7 @@ def test_read_result_checks_the_setup(tmp_path: Path, capsys: pytest.CaptureFixt
     path = tmp_path / "gnn_R10.json"
     path.write_text(json.dumps({"mean": 1.5, "setup": setup}))
     assert read_result(path, setup)["mean"] == 1.5  # a tuple reads back as a list: same setup
-    with pytest.raises(
-        ValueError, match=r"gnn_R10.json: made under another setup .*\['robots'\]"
-    ):
+    with pytest.raises(ValueError, match=r"gnn_R10.json: made under another setup .*\['robots'\]"):
         read_result(path, {**setup, "robots": 20})
     with pytest.raises(ValueError, match=r"differs in \['model_sha256'\]"):
         read_result(path, {**setup, "model_sha256": "abc"})

@@ -15,7 +15,7 @@ torch = pytest.importorskip("torch")
 
 from marl_cover.agents.cli import options  # noqa: E402
 from marl_cover.agents.evaluation.episodes import evaluate  # noqa: E402
-from marl_cover.agents.models.checkpoints import load_model  # noqa: E402
+from marl_cover.agents.models.checkpoints import load_checkpoint, load_model  # noqa: E402
 from marl_cover.agents.models.policy import GNNPolicy  # noqa: E402
 from marl_cover.agents.models.shipped import (  # noqa: E402
     SHIPPED,
@@ -54,6 +54,7 @@ def test_the_card_describes_its_file(name: str) -> None:
     path = model_path(name)
     assert card["name"] == name and card["file"] == path.name
     assert card["sha256"] == hashlib.sha256(path.read_bytes()).hexdigest()
+    assert card["weights_sha256"] == load_checkpoint(path)["sha256"]
     model, metadata = load_model(path)
     assert metadata == {"name": name, "card": f"{name}.json"}
     assert card["architecture"] == asdict(model.config)

@@ -20,6 +20,8 @@ from importlib import resources
 from pathlib import Path
 from typing import Any, TypeVar
 
+from marl_cover.errors import BadFileError
+
 T = TypeVar("T")
 
 #: The package whose YAML files are the presets ``--config NAME`` finds.
@@ -28,6 +30,10 @@ PRESET_PACKAGE = "marl_cover.configs"
 
 class ConfigError(ValueError):
     """A preset, an override or a value that does not fit a config, naming it."""
+
+
+class ConfigFileError(BadFileError, ConfigError):
+    """A config file that cannot be read, or whose keys or values do not fit the config."""
 
 
 def preset_names() -> list[str]:
@@ -75,8 +81,10 @@ def load(cls: type[T], config: str | Path | None = None, overrides: Sequence[str
             ``[1,2]``, ``null``, ``true``).
 
     Raises:
-        ConfigError: the file is missing or not a mapping, a key is unknown, a value has the
-            wrong type or is out of range; the message names the file or the argument.
+        ConfigError: a key is unknown, a value has the wrong type or is out of range; the
+            message names the file or the argument. A file that is not a YAML mapping, or
+            whose keys or values do not fit, raises its subclass :class:`ConfigFileError` (a
+            :class:`~marl_cover.errors.BadFileError` too).
     """
     from omegaconf import OmegaConf
     from omegaconf.errors import OmegaConfBaseException
@@ -87,8 +95,12 @@ def load(cls: type[T], config: str | Path | None = None, overrides: Sequence[str
         try:
             loaded = OmegaConf.load(path)
         except Exception as error:  # noqa: BLE001 (YAML errors come in many types)
-            raise ConfigError(f"{path}: not a YAML mapping ({error})") from None
-        merged = _merge(merged, loaded, str(path))
+            problem = " ".join(str(error).split())
+            raise ConfigFileError(path, f"not a YAML mapping ({problem})") from None
+        try:
+            merged = _merge(merged, loaded, str(path))
+        except ConfigError as error:
+            raise ConfigFileError(path, str(error).removeprefix(f"{path}: ")) from None
     bad = [item for item in overrides if "=" not in item]
     if bad:
         raise ConfigError(f"overrides are key=value, got {bad}")

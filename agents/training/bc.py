@@ -46,7 +46,7 @@ from torch.nn import functional
 from marl_cover.agents.cli import options as configuration
 from marl_cover.agents.evaluation.episodes import evaluate
 from marl_cover.agents.io import write_text_atomic
-from marl_cover.agents.models.checkpoints import load_model, save_model
+from marl_cover.agents.models.checkpoints import load_checkpoint, load_model, save_model
 from marl_cover.agents.models.gnn import AggregationGNN
 from marl_cover.agents.models.logits import action_logits
 from marl_cover.agents.models.policy import GNNPolicy
@@ -333,7 +333,7 @@ def train_bc(config: BCConfig) -> dict[str, Any]:
     step, best_reward = 0, -math.inf
     checkpoint_path = out / "checkpoint.pt"
     if checkpoint_path.exists():
-        state = torch.load(checkpoint_path, weights_only=False)
+        state = load_checkpoint(checkpoint_path)
         model.load_state_dict(state["state_dict"])
         optimizer.load_state_dict(state["optimizer"])
         buffer.sampler.load_state_dict(state["sampler"])

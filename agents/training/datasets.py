@@ -353,6 +353,10 @@ def load_dataset(folder: str | Path, bad_shards: str = "raise") -> list[Episode]
             episodes.extend(read_shard(folder / name, digest))
         except BadFileError as error:
             if bad_shards == "raise":
-                raise
+                raise BadFileError(
+                    error.path,
+                    f"{error.problem}; `marl-cover collect` with the dataset's settings "
+                    f"and out={folder} collects it again, bad_shards=skip leaves it out",
+                ) from None
             warnings.warn(f"skipped a bad shard: {error}", stacklevel=2)
     return sorted(episodes, key=lambda e: e.seed)

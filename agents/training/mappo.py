@@ -52,7 +52,7 @@ import torch
 from marl_cover.agents.cli import options as configuration
 from marl_cover.agents.evaluation.episodes import evaluate
 from marl_cover.agents.io import write_text_atomic
-from marl_cover.agents.models.checkpoints import load_model, save_model
+from marl_cover.agents.models.checkpoints import load_checkpoint, load_model, save_model
 from marl_cover.agents.models.gnn import AggregationGNN
 from marl_cover.agents.models.policy import GNNPolicy
 from marl_cover.agents.models.shipped import model_path
@@ -251,7 +251,7 @@ def _resume(
     returns the iteration, the best evaluation reward and the learning curve so far."""
     if not path.exists():
         return 0, -math.inf, []
-    state = torch.load(path, map_location=device, weights_only=False)
+    state = load_checkpoint(path, map_location=device)
     actor_gnn.load_state_dict(state["state_dict"])
     critic_gnn.load_state_dict(state["critic"])
     optimizer.load_state_dict(state["optimizer"])

@@ -13,14 +13,16 @@ name               task          what it is
 ``<name>.pt`` is the network (:func:`marl_cover.agents.models.checkpoints.load_model`);
 ``<name>.json`` is its card: the commands that made it, its data and seeds, its test figures
 and the SHA-256 of the ``.pt``. Every intermediate model of those recipes is one command away
-(the card's ``recipe``), not shipped. Needs nothing but the standard library to look up.
+(the card's ``recipe``), not shipped. Needs neither torch nor any other optional package to look up.
 """
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
+
+from marl_cover.agents.io import read_json
+from marl_cover.errors import BadFileError
 
 SHIPPED = Path(__file__).resolve().parent
 
@@ -70,7 +72,11 @@ def model_card(name: str) -> dict[str, Any]:
 
     Raises:
         KeyError: ``name`` is not a shipped model, naming the shipped ones.
+        BadFileError: the card is not JSON or not this model's, naming it.
     """
     if name not in SHIPPED_MODELS:
         raise KeyError(f"no shipped model {name!r}; shipped models: {sorted(SHIPPED_MODELS)}")
-    return json.loads((SHIPPED / f"{name}.json").read_text())
+    card = read_json(SHIPPED / f"{name}.json")
+    if not isinstance(card, dict) or card.get("name") != name:
+        raise BadFileError(SHIPPED / f"{name}.json", f"not the model card of {name!r}")
+    return card
