@@ -97,6 +97,7 @@ from marl_cover.ego import (
 )
 from marl_cover.generator import draw_interest, draw_starts
 from marl_cover.graph import SpatialGraph
+from marl_cover.render import EpisodeRendering
 from marl_cover.sources import make_map_source
 from marl_cover.types import CoverageSnapshot, Moves, StepResult
 
@@ -117,7 +118,7 @@ class _EpisodeDraw:
     discovery: Discovery | None
 
 
-class CoverageEnv(ParallelEnv):
+class CoverageEnv(EpisodeRendering, ParallelEnv):
     """The coverage environment; see the module docstring for its spaces and rules."""
 
     metadata = {
@@ -234,6 +235,11 @@ class CoverageEnv(ParallelEnv):
                 reset without a seed; later resets without a seed continue the generator).
             options: ``robot_nodes`` (start waypoints, one per robot) and ``interest_nodes``
                 (the points of interest) fix those draws; other keys are ignored with a warning.
+
+        Raises:
+            ValueError: a bad seed or option, naming it and its first bad entry, or a drawn
+                map this environment cannot use. The environment is then exactly as before
+                the call, its generator included.
         """
         self._start_episode(seed, options)
         zeros = np.zeros(self.config.num_robots, dtype=np.int64)
@@ -279,8 +285,11 @@ class CoverageEnv(ParallelEnv):
         options = dict(options or {})
         for key in sorted(set(options) - set(RESET_OPTIONS)):
             warnings.warn(f"reset ignores unknown option {key!r}", stacklevel=4)
-        fresh = seed is not None or self._rng is None
-        rng = np.random.default_rng(seed) if fresh else copy.deepcopy(self._rng)
+        rng = (
+            np.random.default_rng(seed)
+            if seed is not None or self._rng is None
+            else copy.deepcopy(self._rng)
+        )
         graph = self._map_source.sample(rng)
         state_builder, footprint = self._state_builder, self._footprint
         if graph is not self._graph:
@@ -540,51 +549,6 @@ class CoverageEnv(ParallelEnv):
         if self._graph is None:
             raise RuntimeError("no episode yet; call reset() first")
         return self._graph
-
-    # ------------------------------------------------------------------ rendering
-    def render(self) -> np.ndarray | None:
-        """Draws the map, the points of interest, the robots and their trails.
-
-        Returns an ``(H, W, 3)`` uint8 image in ``"rgb_array"`` mode, ``None`` otherwise.
-        """
-        if self.render_mode is None:
-            gymnasium.logger.warn("render() called without a render_mode; nothing drawn")
-            return None
-        graph = self._episode_map()
-        from marl_cover.render import Renderer
-
-        if self._renderer is None:
-            self._renderer = Renderer(self.render_mode)
-        return self._renderer.draw(
-            graph,
-            self._robot_node,
-            self._interest,
-            self._visited,
-            np.stack(self._trails),
-            title=f"{self._progress_text()}   "
-            f"covered {int((self._interest & self._visited).sum())}/{int(self._interest.sum())}"
-            + self._discovery_text(),
-            robot_xy=self._robot_xy(),
-            discovered=None if self._discovery is None else self._discovery.discovered,
-        )
-
-    def _discovery_text(self) -> str:
-        if self._discovery is None:
-            return ""
-        return f"   discovered {self._discovery.num_discovered}/{self._episode_map().num_nodes}"
-
-    def _progress_text(self) -> str:
-        return f"step {self._num_steps}/{self.config.max_steps}"
-
-    def _robot_xy(self) -> np.ndarray | None:
-        """Where to draw the robots (``None``: on their waypoints)."""
-        return None
-
-    def close(self) -> None:
-        """Closes the render window, if any."""
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
 
 
 def _config_kwargs(kwargs: dict[str, Any]) -> dict[str, Any]:

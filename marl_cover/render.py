@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from typing import Any
+
+import gymnasium
 import numpy as np
 
 from marl_cover.graph import SpatialGraph
@@ -144,3 +147,64 @@ class Renderer:
     def close(self) -> None:
         """Closes the figure."""
         self._plt.close(self.fig)
+
+
+class EpisodeRendering:
+    """``render`` and ``close`` of the coverage environments (mixed into
+    :class:`marl_cover.env.CoverageEnv`, which holds the episode state they draw)."""
+
+    # the episode state it draws, held by the environment
+    render_mode: str | None
+    config: Any
+    _renderer: Any
+    _robot_node: np.ndarray  # (R,)
+    _interest: np.ndarray  # (N,) bool
+    _visited: np.ndarray  # (N,) bool
+    _trails: list[np.ndarray]  # (R,) each
+    _discovery: Any  # marl_cover.discovery.Discovery in exploration, else None
+    _num_steps: int
+
+    def _episode_map(self) -> SpatialGraph:
+        raise NotImplementedError
+
+    def render(self) -> np.ndarray | None:
+        """Draws the map, the points of interest, the robots and their trails.
+
+        Returns an ``(H, W, 3)`` uint8 image in ``"rgb_array"`` mode, ``None`` otherwise.
+        """
+        if self.render_mode is None:
+            gymnasium.logger.warn("render() called without a render_mode; nothing drawn")
+            return None
+        graph = self._episode_map()
+        if self._renderer is None:
+            self._renderer = Renderer(self.render_mode)
+        return self._renderer.draw(
+            graph,
+            self._robot_node,
+            self._interest,
+            self._visited,
+            np.stack(self._trails),
+            title=f"{self._progress_text()}   "
+            f"covered {int((self._interest & self._visited).sum())}/{int(self._interest.sum())}"
+            + self._discovery_text(),
+            robot_xy=self._robot_xy(),
+            discovered=None if self._discovery is None else self._discovery.discovered,
+        )
+
+    def _discovery_text(self) -> str:
+        if self._discovery is None:
+            return ""
+        return f"   discovered {self._discovery.num_discovered}/{self._episode_map().num_nodes}"
+
+    def _progress_text(self) -> str:
+        return f"step {self._num_steps}/{self.config.max_steps}"
+
+    def _robot_xy(self) -> np.ndarray | None:
+        """Where to draw the robots (``None``: on their waypoints)."""
+        return None
+
+    def close(self) -> None:
+        """Closes the render window, if any."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None

@@ -312,7 +312,10 @@ def test_compare_script_prints_and_writes_the_table(tmp_path: Path) -> None:
 
 
 def test_generalize_names_a_bad_model_file() -> None:
-    for path, message in (("no.pt", "no model file at no.pt"), ("README.md", "README.md: not a readable model file")):
+    for path, message in (
+        ("no.pt", "no model file at no.pt"),
+        ("README.md", "README.md: not a readable model file"),
+    ):
         result = run_cli("generalize", f"model={path}", "robots=[10]")
         assert result.returncode != 0 and message in result.stderr
         assert "Traceback" not in result.stderr

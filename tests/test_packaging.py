@@ -16,6 +16,8 @@ from pathlib import Path
 import pytest
 from helpers import ROOT
 
+import marl_cover
+
 pytest.importorskip("build")
 
 
@@ -43,7 +45,8 @@ def test_twine_checks_both(dist: dict[str, Path]) -> None:
 def test_the_wheel_holds_the_package_its_data_and_nothing_else(dist: dict[str, Path]) -> None:
     names = zipfile.ZipFile(dist["wheel"]).namelist()
     tops = {name.split("/")[0] for name in names}
-    assert tops == {"marl_cover", "marl_cover-1.0.0.dist-info"}
+    info = f"marl_cover-{marl_cover.__version__}.dist-info"
+    assert tops == {"marl_cover", info}
     shipped = sorted(n for n in names if n.startswith("marl_cover/agents/models/shipped/"))
     assert [n for n in shipped if n.endswith(".pt")] == [
         f"marl_cover/agents/models/shipped/{name}.pt"
@@ -53,11 +56,9 @@ def test_the_wheel_holds_the_package_its_data_and_nothing_else(dist: dict[str, P
     assert "marl_cover/configs/mappo_finetune.yaml" in names
     assert "marl_cover/agents/evaluation/paper_results.csv" in names
     assert "marl_cover/py.typed" in names
-    entry_points = zipfile.ZipFile(dist["wheel"]).read(
-        "marl_cover-1.0.0.dist-info/entry_points.txt"
-    )
+    entry_points = zipfile.ZipFile(dist["wheel"]).read(f"{info}/entry_points.txt")
     assert b"marl-cover = marl_cover.agents.cli.main:main" in entry_points
-    metadata = zipfile.ZipFile(dist["wheel"]).read("marl_cover-1.0.0.dist-info/METADATA")
+    metadata = zipfile.ZipFile(dist["wheel"]).read(f"{info}/METADATA")
     assert b"License-Expression: MIT" in metadata
 
 

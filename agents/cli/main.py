@@ -33,6 +33,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "bench": ("bench_env", "environment throughput: env steps/s and agent-steps/s"),
     "bench-gnn": ("bench_gnn", "GNN controller time per step, beside the paper's"),
     "bench-mission": ("bench_mission", "the mission's real-time factor"),
+    "fuzz": ("fuzz", "random maps, teams and bad actions, the env's invariants checked"),
     "fetch-map": ("fetch_map", "download and check the paper's map into the user cache"),
 }
 

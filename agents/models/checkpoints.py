@@ -97,9 +97,7 @@ def load_checkpoint(
     try:
         record = torch.load(path, map_location=map_location, weights_only=True)
     except Exception as error:  # noqa: BLE001 (zip, pickle and torch errors alike)
-        raise BadFileError(
-            path, f"not a readable model file ({type(error).__name__}: {error})"
-        ) from None
+        raise BadFileError(path, f"not a readable model file ({_reason(error)})") from None
     if not isinstance(record, dict) or not isinstance(record.get("state_dict"), dict):
         raise BadFileError(path, "not a model file (no 'state_dict' entry)")
     if record.get("format") == MODEL_FORMAT:
@@ -143,6 +141,15 @@ def load_model(path: str | Path, verify: bool = True) -> tuple[AggregationGNN, d
         raise BadFileError(path, f"its weights do not fit its network ({problem})") from None
     metadata = record["metadata"]
     return model.eval(), dict(metadata) if isinstance(metadata, dict) else {}
+
+
+def _reason(error: Exception) -> str:
+    """A load error in one line; for pickled code, only what ``weights_only`` refused."""
+    text = str(error)
+    refused = [line for line in text.splitlines() if "WeightsUnpickler error:" in line]
+    if refused:
+        text = refused[0].strip() + " (weights_only=True runs no pickled code)"
+    return f"{type(error).__name__}: {' '.join(text.split())}"
 
 
 def _check_digest(path: Path, record: dict[str, Any]) -> None:
