@@ -31,6 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
+from marl_cover.errors import MissingFileError
+
 logger = logging.getLogger(__name__)
 
 PAPER_MAP_ENV = "MARL_COVER_PAPER_MAP"
@@ -203,14 +205,14 @@ def paper_map_path() -> Path:
     """Location of the paper's ``grid_slice10.npy``, fetched on first use when online.
 
     Raises:
-        FileNotFoundError: ``$MARL_COVER_PAPER_MAP`` names no file (naming it).
+        MissingFileError: ``$MARL_COVER_PAPER_MAP`` names no file (naming it).
         PaperMapUnavailable: no copy was found and it cannot be downloaded, naming the places
             looked at, the command that fetches it, its URL and ``$MARL_COVER_PAPER_MAP``.
     """
     if os.environ.get(PAPER_MAP_ENV):
         chosen = Path(os.environ[PAPER_MAP_ENV])
         if not chosen.is_file():
-            raise FileNotFoundError(f"{PAPER_MAP_ENV}={chosen} names no file")
+            raise MissingFileError(chosen, f"${PAPER_MAP_ENV} names no file here")
         return chosen
     for path in _checkout_copies():
         if path.is_file():

@@ -282,7 +282,7 @@ def test_comparison_refuses_unpaired_or_broken_files(tmp_path: Path) -> None:
         compare({0: 1.0, 1: 1.0, 2: 1.0}, {0: 1.0, 1: 2.0}, "a", "b")
     twice = tmp_path / "twice.csv"
     twice.write_text("seed,reward\n0,1\n0,2\n")
-    with pytest.raises(ValueError, match="twice.csv, line 3: seed 0 appears twice"):
+    with pytest.raises(ValueError, match="twice.csv: line 3: seed 0 appears twice"):
         read_rewards(twice)
     no_reward = tmp_path / "no_reward.csv"
     no_reward.write_text("seed,score\n0,1\n")
@@ -294,7 +294,7 @@ def test_comparison_refuses_unpaired_or_broken_files(tmp_path: Path) -> None:
         read_rewards(binary)
     text = tmp_path / "text.csv"
     text.write_text("seed,reward\n0,lots\n")
-    with pytest.raises(ValueError, match="text.csv, line 2: .* is not a number"):
+    with pytest.raises(ValueError, match="text.csv: line 2: .* is not a number"):
         read_rewards(text)
 
 

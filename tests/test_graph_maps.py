@@ -129,7 +129,9 @@ def test_paper_preset_window_fraction(paper_map_available: None) -> None:
 def test_paper_map_variable_naming_no_file_is_an_error(tmp_path, monkeypatch) -> None:
     missing = tmp_path / "nowhere.npy"
     monkeypatch.setenv("MARL_COVER_PAPER_MAP", str(missing))
-    with pytest.raises(FileNotFoundError, match=f"MARL_COVER_PAPER_MAP={missing} names no file"):
+    with pytest.raises(
+        FileNotFoundError, match=f"{missing}: \\$MARL_COVER_PAPER_MAP names no file"
+    ):
         paper_map_path()  # not another copy found elsewhere
 
 

@@ -31,7 +31,7 @@ from marl_cover.agents.cli.options import parse
 from marl_cover.agents.evaluation.episodes import evaluate
 from marl_cover.agents.evaluation.paper import paper_numbers
 from marl_cover.agents.evaluation.plots import plot_beside_paper
-from marl_cover.agents.io import file_sha256, read_result, write_text_atomic
+from marl_cover.agents.io import file_sha256, read_json, read_result, write_text_atomic
 from marl_cover.config import TASKS, require
 
 PAPER_METHODS = {"greedy": "greedy", "gnn": "gnn_nonlinear_bc"}
@@ -167,8 +167,7 @@ def run(config: GeneralizeConfig) -> None:
                     write_text_atomic(result, json.dumps(record, indent=2))
                     print(f"done {method} R={robots}", flush=True)
     records = {
-        (r["method"], r["robots"]): r
-        for r in (json.loads(p.read_text()) for p in sorted(out.glob("*_R*.json")))
+        (r["method"], r["robots"]): r for r in (read_json(p) for p in sorted(out.glob("*_R*.json")))
     }
     paper = paper_numbers(f"{config.task}_generalize_5659")
     table(records, paper)

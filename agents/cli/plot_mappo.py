@@ -12,7 +12,6 @@ Example::
 
 from __future__ import annotations
 
-import json
 import sys
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -20,6 +19,7 @@ from pathlib import Path
 
 from marl_cover.agents.cli.options import parse
 from marl_cover.agents.evaluation.paper import paper_numbers
+from marl_cover.agents.io import read_json
 
 PAPER_METHODS = {
     "gnn_linear_ppo": "paper: linear PPO",
@@ -58,7 +58,7 @@ def run(config: PlotConfig) -> None:
         path = folder / "curve.json"
         if not path.is_file():
             raise SystemExit(f"marl-cover plot-mappo: no curve.json in {folder}")
-        curve = json.loads(path.read_text())
+        curve = read_json(path)
         color = f"C{index}"
         sampled = [(r["observations"], r["episode_reward"]) for r in curve if "episode_reward" in r]
         evaluated = [(r["observations"], r["eval_reward"]) for r in curve if "eval_reward" in r]

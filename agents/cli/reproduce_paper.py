@@ -29,7 +29,7 @@ from marl_cover.agents.cli.options import parse
 from marl_cover.agents.evaluation.episodes import evaluate
 from marl_cover.agents.evaluation.paper import paper_numbers
 from marl_cover.agents.evaluation.plots import plot_beside_paper
-from marl_cover.agents.io import write_text_atomic
+from marl_cover.agents.io import read_json, write_text_atomic
 from marl_cover.config import TASKS, require
 
 HOPS = list(range(3, 20, 2))
@@ -182,7 +182,7 @@ def run(config: ReproduceConfig) -> None:
                     continue
                 write_text_atomic(path, json.dumps(play(method, hops, config), indent=2))
                 print(f"done {method} K={hops}", flush=True)
-    records = [json.loads(p.read_text()) for p in sorted(out.glob("*_K*.json"))]
+    records = [read_json(p) for p in sorted(out.glob("*_K*.json"))]
     records = [r for r in records if r.get("task", "coverage") == config.task]
     print_table(records, config.task)
     if records:

@@ -11,7 +11,6 @@ as "paired +d +- s". The statistics are scipy's (``scipy.stats.sem``, the paired
 from __future__ import annotations
 
 import csv
-import json
 import math
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -19,6 +18,9 @@ from typing import Any
 
 import numpy as np
 from scipy import stats
+
+from marl_cover.agents.io import read_json
+from marl_cover.errors import BadFileError, MissingFileError
 
 
 def sem(values: np.ndarray) -> float:
@@ -82,17 +84,19 @@ def read_rewards(path: str | Path) -> dict[int, float]:
     """Reward per seed from an evaluation CSV (columns ``seed`` and ``reward``).
 
     Raises:
-        FileNotFoundError: no such file.
-        ValueError: the file is not text, a column is missing, a value is not a number, or a
+        MissingFileError: no such file.
+        BadFileError: the file is not text, a column is missing, a value is not a number, or a
             seed repeats (the message names the file and the row).
     """
     path = Path(path)
+    if not path.is_file():
+        raise MissingFileError(path, "no evaluation CSV here")
     try:
         with path.open(newline="") as handle:
             return _rewards_of_rows(path, csv.DictReader(handle))
     except UnicodeDecodeError:
-        raise ValueError(
-            f"{path}: not a text file (an evaluation CSV, written by marl-cover evaluate)"
+        raise BadFileError(
+            path, "not a text file (an evaluation CSV, written by marl-cover evaluate)"
         ) from None
 
 
@@ -100,21 +104,22 @@ def _rewards_of_rows(path: Path, reader: csv.DictReader) -> dict[int, float]:
     """The reward per seed of an open evaluation CSV (see :func:`read_rewards`)."""
     missing = {"seed", "reward"} - set(reader.fieldnames or ())
     if missing:
-        raise ValueError(f"{path}: no column {sorted(missing)} (has {reader.fieldnames})")
+        raise BadFileError(path, f"no column {sorted(missing)} (has {reader.fieldnames})")
     rewards: dict[int, float] = {}
     for row_number, row in enumerate(reader, start=2):
         try:
             seed, reward = int(row["seed"]), float(row["reward"])
         except (TypeError, ValueError):
-            raise ValueError(
-                f"{path}, line {row_number}: seed {row['seed']!r} / reward "
-                f"{row['reward']!r} is not a number"
+            raise BadFileError(
+                path,
+                f"line {row_number}: seed {row['seed']!r} / reward {row['reward']!r} is not "
+                "a number",
             ) from None
         if seed in rewards:
-            raise ValueError(f"{path}, line {row_number}: seed {seed} appears twice")
+            raise BadFileError(path, f"line {row_number}: seed {seed} appears twice")
         rewards[seed] = reward
     if not rewards:
-        raise ValueError(f"{path}: no episodes")
+        raise BadFileError(path, "no episodes")
     return rewards
 
 
@@ -122,24 +127,24 @@ def read_mission_totals(path: str | Path, method: str = "gnn") -> dict[int, floa
     """Points visited per seed by one method of a ``marl-cover mission`` table (``mission.json``).
 
     Raises:
-        FileNotFoundError: no such file.
-        ValueError: the file is not a mission table or has no such method (the message names
+        MissingFileError: no such file.
+        BadFileError: the file is not a mission table or has no such method (the message names
             the file and the methods it has).
     """
     path = Path(path)
+    table = read_json(path)
     try:
-        table = json.loads(path.read_text())
         seeds, methods = table["seeds"], table["methods"]
-    except (json.JSONDecodeError, KeyError, TypeError):
-        raise ValueError(
-            f"{path}: not a mission table (marl-cover mission's mission.json, with 'seeds' and "
-            "'methods')"
+    except (KeyError, TypeError):
+        raise BadFileError(
+            path,
+            "not a mission table (marl-cover mission's mission.json, with 'seeds' and 'methods')",
         ) from None
     if method not in methods or "totals" not in methods[method]:
-        raise ValueError(f"{path}: no method {method!r} with totals (has {sorted(methods)})")
+        raise BadFileError(path, f"no method {method!r} with totals (has {sorted(methods)})")
     totals = methods[method]["totals"]
     if len(totals) != len(seeds):
-        raise ValueError(f"{path}: {len(seeds)} seeds but {len(totals)} totals for {method!r}")
+        raise BadFileError(path, f"{len(seeds)} seeds but {len(totals)} totals for {method!r}")
     return {int(seed): float(total) for seed, total in zip(seeds, totals, strict=True)}
 
 

@@ -13,6 +13,8 @@ import csv
 from importlib import resources
 from pathlib import Path
 
+from marl_cover.errors import BadFileError, MissingFileError
+
 #: The shipped table of the paper's figures.
 PAPER_CSV = Path(str(resources.files("marl_cover.agents.evaluation") / "paper_results.csv"))
 #: Figures of the paper's text: ``{name: (mean, sem)}``.
@@ -33,18 +35,22 @@ def paper_numbers(task: str, path: Path = PAPER_CSV) -> dict[tuple[str, int], tu
 
     Raises:
         ValueError: an unknown task, naming the tasks.
-        FileNotFoundError: the table is missing from this installation, naming its path.
+        MissingFileError: the table is missing from this installation, naming its path.
+        BadFileError: the table is damaged, naming it.
     """
     if task not in TASKS:
         raise ValueError(f"the paper has no figures for task {task!r}; tasks: {list(TASKS)}")
     if not path.is_file():
-        raise FileNotFoundError(f"the paper's figures are missing: no file at {path}")
-    with path.open() as handle:
-        return {
-            (row["method"], int(row["x"])): (
-                float(row["mean_reward"]),
-                float(row["std_reward"]) / float(row["episodes"]) ** 0.5,
-            )
-            for row in csv.DictReader(handle)
-            if row["task"] == task
-        }
+        raise MissingFileError(path, "the paper's figures are missing from this installation")
+    try:
+        with path.open(newline="") as handle:
+            return {
+                (row["method"], int(row["x"])): (
+                    float(row["mean_reward"]),
+                    float(row["std_reward"]) / float(row["episodes"]) ** 0.5,
+                )
+                for row in csv.DictReader(handle)
+                if row["task"] == task
+            }
+    except (KeyError, TypeError, ValueError, UnicodeDecodeError, ZeroDivisionError) as error:
+        raise BadFileError(path, f"not the paper's table of figures ({error!r})") from None

@@ -6,6 +6,8 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
+from marl_cover.errors import BadFileError
+
 LOGGERS = ("csv", "tensorboard", "none")
 
 
@@ -27,13 +29,20 @@ def check_same_run(
 
     Raises:
         ValueError: another key differs; the message names the keys and the folder.
+        BadFileError: the saved settings are not a YAML mapping, naming the file.
     """
     import yaml
     from omegaconf import OmegaConf
 
     if not path.exists():
         return
-    saved = yaml.safe_load(path.read_text()) or {}
+    try:
+        saved = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+    except (yaml.YAMLError, UnicodeDecodeError) as error:
+        problem = " ".join(str(error).split())
+        raise BadFileError(path, f"not a run's YAML settings ({problem})") from None
+    if not isinstance(saved, dict):
+        raise BadFileError(path, "not a run's YAML settings (not a mapping)")
     merged = OmegaConf.merge(OmegaConf.create(defaults or {}), OmegaConf.create(saved))
     previous = _flatten(OmegaConf.to_container(merged))  # type: ignore[arg-type]
     current = _flatten(yaml.safe_load(yaml.safe_dump(record)))  # as it reads back: tuples as lists
