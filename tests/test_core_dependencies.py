@@ -11,7 +11,17 @@ import textwrap
 
 from helpers import ROOT, run_cli
 
-OPTIONAL = ("torch", "torchrl", "tensordict", "ortools", "pyvrp", "numba", "matplotlib", "networkx")
+OPTIONAL = (
+    "torch",
+    "torchrl",
+    "tensordict",
+    "ortools",
+    "pyvrp",
+    "numba",
+    "matplotlib",
+    "networkx",
+    "ray",
+)
 
 BLOCKER = textwrap.dedent(
     """
@@ -104,7 +114,7 @@ def test_baselines_are_evaluated_without_torch(tmp_path) -> None:  # noqa: ANN00
         "expert": ["policy=expert", "env.map=city", "episodes=1", "expert.iterations=50"],
     }
     blocked = [[*args, f"out={tmp_path / name}.json"] for name, args in runs.items()]
-    done = run_blocked(f"ARGS = {blocked!r}\n" + BASELINES, "torch", "torchrl", "tensordict")
+    done = run_blocked(f"ARGS = {blocked!r}\n" + BASELINES, "torch", "torchrl", "tensordict", "ray")
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip().splitlines()[-1] == "baselines ok"
     for name, args in runs.items():

@@ -210,8 +210,9 @@ class _CentralGreedy:
 @pytest.mark.parametrize(
     ("argument", "message"),
     [
-        ("episodes=0", "episodes, shard_size and workers must be >= 1"),
-        ("workers=0", "episodes, shard_size and workers must be >= 1"),
+        ("episodes=0", "episodes and shard_size must be >= 1"),
+        ("workers=0", "workers must be >= 1, got 0"),
+        ("backend=spark", "backend must be one of ('serial', 'process', 'ray'), got 'spark'"),
         (
             "expert.mode=closed",
             "expert.mode must be one of ('open_loop', 'receding'), got 'closed'",

@@ -16,27 +16,28 @@ Example (the dataset behind the shipped models, about 10 minutes on two cores)::
 
 from __future__ import annotations
 
+import hashlib
 import sys
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
-from multiprocessing import get_context
 from pathlib import Path
 from typing import Any
 
 from marl_cover import EnvSettings, parallel_env
 from marl_cover.agents.cli.options import parse
-from marl_cover.agents.io import progress_bar
+from marl_cover.agents.distributed import WorkerOptions, run_tasks
+from marl_cover.agents.io import progress_bar, write_bytes_atomic
 from marl_cover.agents.training.datasets import (
     SHARD_PATTERN,
     ShardManifest,
     record_episode,
-    write_shard,
+    shard_bytes,
 )
 from marl_cover.config import require
 
 #: Settings that may change between the legs of one dataset (a dataset may be moved).
-RESUMABLE = ("out", "workers", "max_shards", "bad_shards")
+RESUMABLE = ("out", "backend", "workers", "ray", "max_shards", "bad_shards")
 
 
 @dataclass
@@ -63,13 +64,14 @@ class CollectExpert:
 
 
 @dataclass
-class CollectConfig:
-    """A dataset of expert episodes."""
+class CollectConfig(WorkerOptions):
+    """A dataset of expert episodes, and where its shards are collected."""
 
+    backend: str = "process"  # serial, process or ray (one task per shard)
+    workers: int = 2  # shards collected at once
     episodes: int = 2000  # episodes, one per seed
     seed: int = 0  # first seed
     shard_size: int = 50  # episodes per shard file
-    workers: int = 2  # worker processes
     out: str = "data/coverage_expert"  # the dataset's folder
     max_shards: int = -1  # stop after writing this many new shards (-1: all)
     bad_shards: str = "recollect"  # a bad shard on resume: recollect or raise
@@ -77,10 +79,11 @@ class CollectConfig:
     expert: CollectExpert = field(default_factory=CollectExpert)
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         require(
             (
-                min(self.episodes, self.shard_size, self.workers) >= 1,
-                "episodes, shard_size and workers must be >= 1",
+                min(self.episodes, self.shard_size) >= 1,
+                "episodes and shard_size must be >= 1",
             ),
             (self.seed >= 0, f"seed must be >= 0, got {self.seed}"),
             (
@@ -90,8 +93,9 @@ class CollectConfig:
         )
 
 
-def collect_shard(job: tuple[int, list[int], dict[str, Any]]) -> tuple[int, str, float]:
-    """Records and writes one shard; returns (shard, its SHA-256, seconds)."""
+def collect_shard(job: tuple[int, list[int], dict[str, Any]]) -> tuple[int, bytes, float]:
+    """Records one shard; returns (shard, the shard file's bytes, seconds). The driver writes
+    it, so workers on other machines need no shared disk."""
     from marl_cover.agents.experts import RoutingExpert
 
     shard, seeds, config = job
@@ -106,8 +110,7 @@ def collect_shard(job: tuple[int, list[int], dict[str, Any]]) -> tuple[int, str,
         max_iterations=expert["iterations"] or None,
     )
     episodes = [record_episode(env, policy, seed) for seed in seeds]
-    digest = write_shard(Path(config["out"]) / SHARD_PATTERN.format(shard), episodes)
-    return shard, digest, time.perf_counter() - start
+    return shard, shard_bytes(episodes), time.perf_counter() - start
 
 
 def open_manifest(out: Path, settings: dict[str, Any]) -> ShardManifest:
@@ -175,18 +178,15 @@ def run(config: CollectConfig) -> None:
     done = num_shards - len(jobs) if config.max_shards < 0 else None
     print(f"{num_shards} shards, {len(jobs)} to collect, {config.workers} workers -> {out}")
     start = time.perf_counter()
-    results: Iterable[tuple[int, str, float]]
-    pool = get_context("spawn").Pool(config.workers) if config.workers > 1 else None
-    results = map(collect_shard, jobs) if pool is None else pool.imap_unordered(collect_shard, jobs)
     seeds = {shard: seeds for shard, seeds, _ in jobs}
+    finished = run_tasks(collect_shard, jobs, config)
     bar = progress_bar("collect", unit="shard")
-    for shard, digest, seconds in bar(results, total=len(jobs)) if bar else results:
+    for _, (shard, data, seconds) in bar(finished, total=len(jobs)) if bar else finished:
+        write_bytes_atomic(out / SHARD_PATTERN.format(shard), data)
+        digest = hashlib.sha256(data).hexdigest()
         manifest.add(SHARD_PATTERN.format(shard), digest, seeds[shard])
         if bar is None:
             print(f"shard {shard}: {len(seeds[shard])} episodes in {seconds:.1f} s", flush=True)
-    if pool is not None:
-        pool.close()
-        pool.join()
     size = sum(p.stat().st_size for p in out.glob("shard_*.npz"))
     print(
         f"collected {len(jobs)} shards in {time.perf_counter() - start:.1f} s; dataset "

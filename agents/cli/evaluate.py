@@ -11,9 +11,15 @@ follows the model's unless it is set. In exploration the experts plan on the tru
 (``expert.information=full``, the imitation teacher), on what the team has discovered
 (``known``, the fair expert) or on the floor plan with the discovered points (``expected``).
 
+Episodes run in shards of ``shard_size`` seeds, where ``backend`` says: ``serial`` (here),
+``process`` (``workers`` local processes) or ``ray`` (Ray tasks on a local instance or a
+cluster, ``ray.address=auto``). Each episode is seeded by its own seed, so every backend writes
+the same rows (the timing columns aside); a Ray task whose worker dies is retried.
+
 Examples::
 
     marl-cover evaluate policy=greedy env.map=paper episodes=100 seed=0
+    marl-cover evaluate policy=greedy episodes=200 backend=ray workers=2
     marl-cover evaluate policy=gnn env.map=paper                    # the shipped default
     marl-cover evaluate policy=gnn model=gnn_linear env.map=paper
     marl-cover evaluate policy=expert_rh expert.time_limit=0.15 env.task=exploration \
@@ -33,7 +39,8 @@ from typing import Any
 
 from marl_cover import EnvSettings, parallel_env
 from marl_cover.agents.cli.options import parse
-from marl_cover.agents.evaluation.episodes import evaluate
+from marl_cover.agents.distributed import WorkerOptions, run_tasks
+from marl_cover.agents.evaluation.episodes import EpisodeResult, evaluate, summarize
 from marl_cover.agents.io import progress_bar, write_text_atomic
 from marl_cover.config import require
 
@@ -79,8 +86,8 @@ class GNNOptions:
 
 
 @dataclass
-class EvaluateConfig:
-    """An evaluation: a policy, the seeds, the environment."""
+class EvaluateConfig(WorkerOptions):
+    """An evaluation: a policy, the seeds, the environment, and where episodes run."""
 
     policy: str = "greedy"  # one of POLICIES
     model: str | None = None  # gnn*: a shipped model name or a file (None: the task's default)
@@ -88,11 +95,13 @@ class EvaluateConfig:
     seed: int = 0  # first seed
     out: str = "outputs/evaluate.json"  # JSON summary; the per-seed CSV goes beside it
     fallback: str = "random"  # greedy, expert_local: random or stay when nothing is in reach
+    shard_size: int = 10  # episodes of one task
     env: EnvSettings = field(default_factory=EnvSettings)
     expert: ExpertOptions = field(default_factory=ExpertOptions)
     gnn: GNNOptions = field(default_factory=GNNOptions)
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         policy, gnn, expert = self.policy, self.gnn, self.expert
         rollout = policy in ("gnn_rollout", "gnn_local_rollout")
         default = GNNOptions()
@@ -100,6 +109,7 @@ class EvaluateConfig:
         require(
             (policy in POLICIES, f"unknown policy {policy!r}; policies: {list(POLICIES)}"),
             (self.episodes >= 1 and self.seed >= 0, "episodes must be >= 1 and seed >= 0"),
+            (self.shard_size >= 1, f"shard_size must be >= 1, got {self.shard_size}"),
             (self.fallback in FALLBACKS, f"fallback must be one of {FALLBACKS}"),
             (
                 expert.clock or policy in ("expert_rh", "expert_local"),
@@ -245,18 +255,38 @@ def make_policy(config: EvaluateConfig, model: Any = None) -> Any:
     )
 
 
+def evaluate_shard(job: tuple[EvaluateConfig, list[int]]) -> list[EpisodeResult]:
+    """One task: the episodes of some seeds, with the environment and policy built here."""
+    config, seeds = job
+    model = load_gnn(config)[0] if config.policy.startswith("gnn") else None
+    env = parallel_env(**config.env.as_kwargs())
+    return evaluate(env, make_policy(config, model), seeds).results
+
+
+def evaluate_seeds(config: EvaluateConfig, seeds: Sequence[int]) -> list[EpisodeResult]:
+    """The episodes of ``seeds``, in shards of ``config.shard_size`` where ``config`` says,
+    ordered by seed; progress is shown as shards finish."""
+    size = config.shard_size if config.backend != "serial" else len(seeds)
+    shards = [list(seeds[i : i + size]) for i in range(0, len(seeds), size)]
+    bar = progress_bar(config.policy, unit="shard")
+    finished = run_tasks(evaluate_shard, [(config, shard) for shard in shards], config)
+    results = [
+        r for _, part in (bar(finished, total=len(shards)) if bar else finished) for r in part
+    ]
+    return sorted(results, key=lambda r: r.seed)
+
+
 def run(config: EvaluateConfig) -> dict[str, Any]:
     """Plays the episodes, writes ``out`` (JSON) and its CSV, prints the summary line."""
-    model, model_info = None, None
+    model_info = None
     if config.policy.startswith("gnn"):
-        model, model_info, config = load_gnn(config)
+        _, model_info, config = load_gnn(config)
     try:
-        env = parallel_env(**config.env.as_kwargs())
+        env = parallel_env(**config.env.as_kwargs())  # checks the settings before any task
     except (FileNotFoundError, ValueError) as error:  # e.g. a grid file that is not there
         raise SystemExit(str(error)) from None
-    policy = make_policy(config, model)
     seeds = range(config.seed, config.seed + config.episodes)
-    summary = evaluate(env, policy, seeds, progress=progress_bar(config.policy))
+    summary = summarize(evaluate_seeds(config, seeds))
     record = {
         "config": asdict(config),
         "gnn": model_info,
@@ -264,12 +294,7 @@ def run(config: EvaluateConfig) -> dict[str, Any]:
     }
     out = Path(config.out)
     write_text_atomic(out, json.dumps(record, indent=2))
-    rows = [asdict(r) for r in summary.results]
-    table = io.StringIO()
-    writer = csv.DictWriter(table, fieldnames=list(rows[0]))
-    writer.writeheader()
-    writer.writerows(rows)
-    write_text_atomic(out.with_suffix(".csv"), table.getvalue())
+    write_text_atomic(out.with_suffix(".csv"), results_csv(summary.results))
     print(
         f"{config.policy} on {env.config.map}, {summary.episodes} episodes "
         f"(seeds {seeds.start}..{seeds.stop - 1}): reward {summary.mean:.2f} +- "
@@ -280,6 +305,16 @@ def run(config: EvaluateConfig) -> dict[str, Any]:
     )
     print(f"wrote {out} and {out.with_suffix('.csv')}")
     return record
+
+
+def results_csv(results: Sequence[EpisodeResult]) -> str:
+    """The per-seed CSV of an evaluation: one row per episode, in seed order."""
+    rows = [asdict(r) for r in results]
+    table = io.StringIO()
+    writer = csv.DictWriter(table, fieldnames=list(rows[0]))
+    writer.writeheader()
+    writer.writerows(rows)
+    return table.getvalue()
 
 
 def main(argv: Sequence[str] | None = None, prog: str = "marl-cover evaluate") -> None:

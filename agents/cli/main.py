@@ -49,6 +49,7 @@ EXTRAS = {
     "networkx": "render",
     "PIL": "render",
     "numba": "fast",
+    "ray": "ray",
 }
 
 

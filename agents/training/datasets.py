@@ -235,11 +235,16 @@ def write_shard(path: Path, episodes: list[Episode]) -> str:
     Returns:
         The SHA-256 of the bytes written, for the dataset's :class:`ShardManifest`.
     """
-    buffer = io.BytesIO()
-    np.savez_compressed(buffer, **_pack(episodes))
-    data = buffer.getvalue()
+    data = shard_bytes(episodes)
     write_bytes_atomic(path, data)
     return hashlib.sha256(data).hexdigest()
+
+
+def shard_bytes(episodes: list[Episode]) -> bytes:
+    """The bytes of a shard file holding ``episodes`` (what :func:`write_shard` writes)."""
+    buffer = io.BytesIO()
+    np.savez_compressed(buffer, **_pack(episodes))
+    return buffer.getvalue()
 
 
 def read_shard(path: Path, sha256: str | None = None) -> list[Episode]:

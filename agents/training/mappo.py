@@ -306,6 +306,8 @@ def _make_collector(
         "storing_device": device,
         "auto_register_policy_transforms": False,
     }
+    if c.backend == "ray":
+        return _ray_collector(config, actor, kwargs, seed)
     if c.workers == 1:  # seeded before the collector's first reset, which it makes when built
         env = make_env(config)
         env.set_seed(seed)
@@ -313,6 +315,33 @@ def _make_collector(
     factories = [_EnvFactory(config)] * c.workers
     collector = MultiSyncCollector(factories, actor, **kwargs)
     collector.set_seed(seed)  # seeds the workers' environments, then resets them
+    return collector
+
+
+def _ray_collector(config: MAPPOConfig, actor: Any, kwargs: dict[str, Any], seed: int) -> Any:
+    """TorchRL's Ray collection: ``workers`` remote collectors (one CPU each), each with its
+    own batched environment, synchronised so that every batch comes from the current policy."""
+    from torchrl.collectors import Collector
+
+    from marl_cover.agents.distributed.executor import ray_init
+
+    c = config.collector
+    ray_init(c.ray, c.workers)
+    options = {
+        "remote_configs": {"num_cpus": 1, "memory": 2 * 1024**3},
+        "collector_kwargs": {"auto_register_policy_transforms": False},
+    }
+    kwargs = {k: v for k, v in kwargs.items() if k != "auto_register_policy_transforms"}
+    collector = Collector(
+        [_EnvFactory(config)] * c.workers,
+        actor,
+        backend="ray",
+        sync=True,
+        backend_options=options,
+        **kwargs,
+    )
+    collector.set_seed(seed)
+    collector.update_policy_weights_()  # the remote collectors start from the learner's weights
     return collector
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from marl_cover.agents.distributed import WorkerOptions
 from marl_cover.agents.models.gnn import GNNConfig
 from marl_cover.agents.models.value import AGGREGATES
 from marl_cover.agents.training.runs import LOGGERS
@@ -14,20 +15,24 @@ REWARDS = ("team", "own")
 
 
 @dataclass
-class CollectorConfig:
-    """Data collection.
+class CollectorConfig(WorkerOptions):
+    """Data collection (TorchRL collectors; the learner stays in the training process).
 
     Attributes:
+        backend: ``process`` (``workers`` collector processes; one runs in the training
+            process) or ``ray`` (``workers`` Ray actors, TorchRL's ``RayCollector``, on a
+            local instance or a cluster: ``ray.address``); ``serial``: in the training process.
+        workers: Collectors, each stepping its own batched environment.
         n_iters: Training iterations (one batch each).
-        frames_per_batch: Env steps per batch (each holds ``num_robots`` observations).
-        num_envs: Episodes stepped together per worker.
-        workers: Collector processes (1: in the training process).
+        frames_per_batch: Env steps per batch, over all collectors (each step holds
+            ``num_robots`` observations).
+        num_envs: Episodes stepped together per collector.
     """
 
+    backend: str = "process"
     n_iters: int = 250
     frames_per_batch: int = 1000
     num_envs: int = 20
-    workers: int = 1
 
 
 @dataclass
@@ -151,6 +156,10 @@ class MAPPOConfig:
         if self.logger not in LOGGERS:
             raise ValueError(f"logger must be one of {LOGGERS}, got {self.logger!r}")
         c = self.collector
+        if isinstance(c, dict):
+            c = self.collector = CollectorConfig(**c)
+        if c.backend == "serial" and c.workers != 1:
+            raise ValueError("collector.backend=serial collects in the training process: workers=1")
         if min(c.n_iters, c.frames_per_batch, c.num_envs, c.workers) < 1:
             raise ValueError("collector.n_iters, frames_per_batch, num_envs, workers must be >= 1")
         if c.frames_per_batch % (c.num_envs * c.workers):
