@@ -57,7 +57,6 @@ ray = pytest.importorskip("ray", reason="ray is not installed (pip install -e '.
 
 @pytest.fixture(scope="module")
 def local_ray():
-    os.environ.setdefault("RAY_AUTH_MODE", "disabled")
     if not ray.is_initialized():
         ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False)
     ray.cloudpickle.register_pickle_by_value(sys.modules[__name__])  # FailOnce below
@@ -187,3 +186,35 @@ def test_the_remote_collectors_get_the_learners_weights(local_ray) -> None:
                 assert torch.equal(weights[name], tensor), name
     finally:
         collector.shutdown()
+
+
+def test_a_grid_through_ray_is_the_serial_grid(tmp_path) -> None:
+    common = [
+        "policies=[greedy,greedy_central]",
+        "hops=[2,5]",
+        "robots=[3,5]",
+        "episodes=4",
+        "shard_size=2",
+        "env.city_size=100",
+        "env.max_steps=20",
+    ]
+    serial = run_cli("grid", *common, f"out={tmp_path / 'serial'}")
+    assert serial.returncode == 0, serial.stderr
+    through_ray = run_cli("grid", *common, "backend=ray", "workers=2", f"out={tmp_path / 'ray'}")
+    assert through_ray.returncode == 0, through_ray.stderr
+    texts = [(tmp_path / name / "grid.csv").read_text() for name in ("serial", "ray")]
+    assert texts[0] == texts[1]
+    rows = list(csv.DictReader(io.StringIO(texts[0])))
+    assert len(rows) == 2 * 2 * 2 * 4
+    assert [r["seed"] for r in rows[:4]] == ["0", "1", "2", "3"]
+    cells = json.loads((tmp_path / "ray" / "grid.json").read_text())["cells"]
+    assert [(c["policy"], c["robots"], c["hops"]) for c in cells[:3]] == [
+        ("greedy", 3, 2),
+        ("greedy", 3, 5),
+        ("greedy", 5, 2),
+    ]
+    # greedy on the robots' ego-graphs and on the state choose the same moves
+    for a, b in zip(cells[:4], cells[4:], strict=True):
+        assert a["mean"] == b["mean"]
+    assert "| greedy | city | 3 | 2 |" in through_ray.stdout
+    assert (tmp_path / "ray" / "grid.png").is_file()

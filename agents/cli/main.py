@@ -25,6 +25,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "train-mappo": ("train_mappo", "MAPPO / IPPO with TorchRL on the batched environment"),
     "average": ("average", "the weight average of a run's last snapshots, chosen on seeds"),
     "sweep": ("sweep", "one behaviour-cloning run per (kind, K)"),
+    "grid": ("grid", "an evaluation grid (policies x K x maps x teams): one CSV, one plot"),
     "generalize": ("generalize", "10..100 robots on the 5659-waypoint map, GNN beside greedy"),
     "reproduce-paper": ("reproduce_paper", "the paper's K sweeps beside its published numbers"),
     "mission": ("mission", "the quadrotor mission: discrete policies flying robots"),
@@ -33,6 +34,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "bench": ("bench_env", "environment throughput: env steps/s and agent-steps/s"),
     "bench-gnn": ("bench_gnn", "GNN controller time per step, beside the paper's"),
     "bench-mission": ("bench_mission", "the mission's real-time factor"),
+    "bench-scale-out": ("bench_scale_out", "serial beside 1 and 2 Ray workers: eval, data, MAPPO"),
     "fuzz": ("fuzz", "random maps, teams and bad actions, the env's invariants checked"),
     "fetch-map": ("fetch_map", "download and check the paper's map into the user cache"),
 }

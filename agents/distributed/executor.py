@@ -9,7 +9,6 @@ when it first completes, so nothing is lost or counted twice.
 
 from __future__ import annotations
 
-import os
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from multiprocessing import get_context
@@ -105,7 +104,6 @@ def ray_init(options: RayOptions, num_cpus: int) -> None:
     if options.address:
         ray.init(address=options.address, log_to_driver=False)
     else:
-        os.environ.setdefault("RAY_AUTH_MODE", "disabled")  # a private instance: no token
         ray.init(address="local", num_cpus=num_cpus, include_dashboard=False, log_to_driver=False)
 
 
