@@ -51,6 +51,10 @@ def test_the_code_blocks_run(page: Path, tmp_path: Path, monkeypatch: pytest.Mon
         pytest.importorskip("ray")
     try:
         run_page(page, tmp_path)
+        if "ray start" in page.read_text():  # the commands ran here, and left no connection
+            import ray
+
+            assert not ray.is_initialized()
     finally:
         if "ray start" in page.read_text():  # never leave a cluster behind
             subprocess.run(["ray", "stop", "--force"], capture_output=True, check=False)

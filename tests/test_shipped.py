@@ -95,7 +95,10 @@ def test_the_presets_reproduce_the_recorded_recipes(name: str, preset: str) -> N
     command = next(s["command"] for s in card["recipe"] if "train-mappo" in s["command"])
     _, _, *args = command.split()
     assert args[:2] == ["--config", preset]
-    assert options.as_dict(options.load(MAPPOConfig, preset, args[2:])) == card["config"]
+    config = options.as_dict(options.load(MAPPOConfig, preset, args[2:]))
+    for where in ("backend", "ray"):  # where collection runs, not what it computes
+        del config["collector"][where]
+    assert config == card["config"]
 
 
 def test_a_bad_model_name_is_named_with_the_shipped_ones(tmp_path) -> None:

@@ -171,11 +171,17 @@ def checks(rows: list[dict]) -> list[dict]:
 
 def run(config: BenchScaleOutConfig) -> dict[str, Any]:
     """Runs the cases, prints the table, writes the JSON."""
-    ray_init(RayOptions(), num_cpus=2)
+    started = ray_init(RayOptions(), num_cpus=2)
     rows: list[dict] = []
-    for letter, case in (("a", greedy_case), ("b", expert_case), ("c", mappo_case)):
-        if letter in config.cases:
-            rows += case(config)
+    try:
+        for letter, case in (("a", greedy_case), ("b", expert_case), ("c", mappo_case)):
+            if letter in config.cases:
+                rows += case(config)
+    finally:
+        if started:
+            import ray
+
+            ray.shutdown()
     summary = checks(rows)
     print(
         "| case | serial | ray, 1 worker | ray, 2 workers | 2 / 1 | ray 1 / serial | target met |"

@@ -94,25 +94,27 @@ def run(config: GridConfig) -> list[dict[str, Any]]:
     owner = [index for index in range(len(cells)) for _ in range(0, len(seeds), size)]
     bar = progress_bar("grid", unit="shard")
     finished = run_tasks(evaluate_shard, jobs, config)
-    rows = []
+    ranked: list[tuple[int, int, dict[str, Any]]] = []  # (cell, seed, row)
     for job, results in bar(finished, total=len(jobs)) if bar else finished:
-        env = cells[owner[job]].env
-        policy = cells[owner[job]].policy
-        rows += [
-            {
-                "policy": policy,
-                "map": env.map,
-                "robots": env.num_robots,
-                "hops": env.hops,
-                "seed": r.seed,
-                "reward": r.reward,
-                "coverage": r.coverage,
-                "steps": r.steps,
-            }
+        cell = cells[owner[job]]
+        ranked += [
+            (
+                owner[job],
+                r.seed,
+                {
+                    "policy": cell.policy,
+                    "map": cell.env.map,
+                    "robots": cell.env.num_robots,
+                    "hops": cell.env.hops,
+                    "seed": r.seed,
+                    "reward": r.reward,
+                    "coverage": r.coverage,
+                    "steps": r.steps,
+                },
+            )
             for r in results
         ]
-    order = {(c.policy, c.env.map, c.env.num_robots, c.env.hops): i for i, c in enumerate(cells)}
-    rows.sort(key=lambda r: (order[(r["policy"], r["map"], r["robots"], r["hops"])], r["seed"]))
+    rows = [row for _, _, row in sorted(ranked, key=lambda item: item[:2])]
     out = Path(config.out)
     table = io.StringIO()
     writer = csv.DictWriter(table, fieldnames=list(COLUMNS))
@@ -124,10 +126,10 @@ def run(config: GridConfig) -> list[dict[str, Any]]:
         out / "grid.json", json.dumps({"config": asdict(config), "cells": summary}, indent=1)
     )
     print("| policy | map | robots | K | reward (mean +- SEM) |\n|---|---|---|---|---|")
-    for cell in summary:
+    for line in summary:
         print(
-            f"| {cell['policy']} | {cell['map']} | {cell['robots']} | {cell['hops']} | "
-            f"{cell['mean']:.2f} +- {cell['sem']:.2f} |"
+            f"| {line['policy']} | {line['map']} | {line['robots']} | {line['hops']} | "
+            f"{line['mean']:.2f} +- {line['sem']:.2f} |"
         )
     plot(summary, out / "grid.png")
     print(f"wrote {out / 'grid.csv'}, {out / 'grid.json'} and {out / 'grid.png'}")

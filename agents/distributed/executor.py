@@ -94,17 +94,23 @@ def _run_processes(
         yield from pool.imap_unordered(_indexed, jobs)
 
 
-def ray_init(options: RayOptions, num_cpus: int) -> None:
+def ray_init(options: RayOptions, num_cpus: int) -> bool:
     """Connects to Ray unless already connected: a local instance of ``num_cpus`` CPUs for an
-    empty address, else the cluster at ``options.address`` (``"auto"``: the running one)."""
+    empty address, else the cluster at ``options.address`` (``"auto"``: the running one).
+
+    Returns:
+        Whether this call connected (the caller then disconnects, ``ray.shutdown()``, when
+        done, so that no connection outlives the job that made it).
+    """
     import ray
 
     if ray.is_initialized():
-        return
+        return False
     if options.address:
         ray.init(address=options.address, log_to_driver=False)
     else:
         ray.init(address="local", num_cpus=num_cpus, include_dashboard=False, log_to_driver=False)
+    return True
 
 
 def _run_ray(
@@ -112,16 +118,20 @@ def _run_ray(
 ) -> Iterator[tuple[int, R]]:
     import ray
 
-    ray_init(options.ray, options.workers)
+    started = ray_init(options.ray, options.workers)
     remote = ray.remote(num_cpus=1, max_retries=options.ray.max_retries, retry_exceptions=True)(
         _indexed
     )
     pending: dict[Any, int] = {}
     queue = list(enumerate(arguments))
-    while queue or pending:
-        while queue and len(pending) < options.workers:  # at most `workers` at a time
-            index, argument = queue.pop(0)
-            pending[remote.remote((task, index, argument))] = index
-        (done,), _ = ray.wait(list(pending), num_returns=1)
-        del pending[done]
-        yield ray.get(done)
+    try:
+        while queue or pending:
+            while queue and len(pending) < options.workers:  # at most `workers` at a time
+                index, argument = queue.pop(0)
+                pending[remote.remote((task, index, argument))] = index
+            (done,), _ = ray.wait(list(pending), num_returns=1)
+            del pending[done]
+            yield ray.get(done)
+    finally:
+        if started:
+            ray.shutdown()

@@ -221,6 +221,10 @@ def train_mappo(config: MAPPOConfig) -> dict[str, Any]:
         start_time = time.perf_counter()
     if collector is not None:
         collector.shutdown()
+        if getattr(collector, "disconnect_ray", False):  # this run connected to Ray
+            import ray
+
+            ray.shutdown()
     if progress is not None:
         progress.close()
     save_model(out / "model.pt", _cpu(actor_gnn), {**metadata, "iteration": iteration})
@@ -326,7 +330,7 @@ def _ray_collector(config: MAPPOConfig, actor: Any, kwargs: dict[str, Any], seed
     from marl_cover.agents.distributed.executor import ray_init
 
     c = config.collector
-    ray_init(c.ray, c.workers)
+    started = ray_init(c.ray, c.workers)
     options = {
         "remote_configs": {"num_cpus": 1, "memory": 2 * 1024**3},
         "collector_kwargs": {"auto_register_policy_transforms": False},
@@ -342,6 +346,7 @@ def _ray_collector(config: MAPPOConfig, actor: Any, kwargs: dict[str, Any], seed
     )
     collector.set_seed(seed)
     collector.update_policy_weights_()  # the remote collectors start from the learner's weights
+    collector.disconnect_ray = started  # train_mappo disconnects after shutdown() if so
     return collector
 
 
