@@ -17,6 +17,16 @@ import numpy as np
 from marl_cover.graph import SpatialGraph
 
 ROOT = Path(__file__).resolve().parent.parent
+#: ``marl-cover collect`` settings of a five-episode, three-shard dataset (seconds to collect).
+TINY_DATASET = (
+    "episodes=5",
+    "shard_size=2",
+    "env.map=city",
+    "env.city_size=120",
+    "env.max_steps=15",
+    "env.hops=6",
+    "expert.iterations=100",
+)
 
 
 def random_grid_graph(

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import run_cli
+from helpers import TINY_DATASET, run_cli
 
 import marl_cover
 from marl_cover.agents.experts import RoutingExpert
@@ -26,16 +26,7 @@ from marl_cover.errors import BadFileError, MissingFileError
 
 pytest.importorskip("pyvrp")
 ROOT = Path(__file__).resolve().parent.parent
-COMMON = [
-    "episodes=5",
-    "shard_size=2",
-    "env.map=city",
-    "env.city_size=120",
-    "env.max_steps=15",
-    "env.hops=6",
-    "expert.iterations=100",
-    "workers=1",
-]
+COMMON = [*TINY_DATASET, "workers=1"]
 
 
 def collect(out: Path, *extra: str) -> subprocess.CompletedProcess:

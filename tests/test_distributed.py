@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from helpers import run_cli
+from helpers import TINY_DATASET, run_cli
 
 from marl_cover import EnvSettings
 from marl_cover.agents.cli.evaluate import EvaluateConfig, evaluate_shard, results_csv
@@ -118,17 +118,8 @@ def test_evaluation_through_ray_writes_the_serial_rows(tmp_path) -> None:
 
 def test_a_dataset_collected_through_ray_is_the_serial_one(tmp_path) -> None:
     pytest.importorskip("pyvrp")
-    common = [
-        "episodes=5",
-        "shard_size=2",
-        "env.map=city",
-        "env.city_size=120",
-        "env.max_steps=15",
-        "env.hops=6",
-        "expert.iterations=100",
-    ]
     for name, backend in (("serial", ["backend=serial"]), ("ray", ["backend=ray", "workers=2"])):
-        done = run_cli("collect", *common, *backend, f"out={tmp_path / name}")
+        done = run_cli("collect", *TINY_DATASET, *backend, f"out={tmp_path / name}")
         assert done.returncode == 0, done.stderr
     for shard in ("shard_00000.npz", "shard_00001.npz", "shard_00002.npz"):
         assert (tmp_path / "serial" / shard).read_bytes() == (tmp_path / "ray" / shard).read_bytes()

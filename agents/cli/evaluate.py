@@ -266,7 +266,7 @@ def evaluate_shard(job: tuple[EvaluateConfig, list[int]]) -> list[EpisodeResult]
 def evaluate_seeds(config: EvaluateConfig, seeds: Sequence[int]) -> list[EpisodeResult]:
     """The episodes of ``seeds``, in shards of ``config.shard_size`` where ``config`` says,
     ordered by seed; progress is shown as shards finish."""
-    size = config.shard_size if config.backend != "serial" else len(seeds)
+    size = config.shard_size
     shards = [list(seeds[i : i + size]) for i in range(0, len(seeds), size)]
     bar = progress_bar(config.policy, unit="shard")
     finished = run_tasks(evaluate_shard, [(config, shard) for shard in shards], config)

@@ -262,13 +262,14 @@ def read_shard(path: Path, sha256: str | None = None) -> list[Episode]:
     path = Path(path)
     if not path.is_file():
         raise MissingFileError(path, "no dataset shard here")
+    data = path.read_bytes()  # read once: hashed and parsed from memory, no handle kept
     if sha256 is not None:
-        found = file_sha256(path)
+        found = hashlib.sha256(data).hexdigest()
         if found != sha256:
             raise BadFileError(path, f"SHA-256 is {found}, the manifest records {sha256}")
     try:
-        with open(path, "rb") as handle, np.load(handle, allow_pickle=False) as data:
-            return _unpack({k: data[k] for k in data.files})
+        with np.load(io.BytesIO(data), allow_pickle=False) as arrays:
+            return _unpack({k: arrays[k] for k in arrays.files})
     except Exception as error:  # noqa: BLE001 (zip, zlib, numpy and shape errors alike)
         raise BadFileError(
             path, f"not a whole dataset shard ({type(error).__name__}: {error})"

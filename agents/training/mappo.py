@@ -50,6 +50,7 @@ import numpy as np
 import torch
 
 from marl_cover.agents.cli import options as configuration
+from marl_cover.agents.distributed.executor import ray_init
 from marl_cover.agents.evaluation.episodes import evaluate
 from marl_cover.agents.io import write_text_atomic
 from marl_cover.agents.models.checkpoints import load_checkpoint, load_model, save_model
@@ -126,8 +127,11 @@ def train_mappo(config: MAPPOConfig) -> dict[str, Any]:
 
     c = config.collector
     collector: Any = None  # a TorchRL collector, while iterations are left
+    connected_ray = False  # whether this run connected to Ray (and so disconnects)
     if iteration < c.n_iters:
         seed = config.seed + 100_003 * iteration
+        if c.backend == "ray":  # connected here, disconnected when collection ends
+            connected_ray = ray_init(c.ray, c.workers)
         collector = _make_collector(config, actor, device, c.n_iters - iteration, seed)
     buffer = ReplayBuffer(
         storage=LazyTensorStorage(c.frames_per_batch, device=device),
@@ -221,7 +225,7 @@ def train_mappo(config: MAPPOConfig) -> dict[str, Any]:
         start_time = time.perf_counter()
     if collector is not None:
         collector.shutdown()
-        if getattr(collector, "disconnect_ray", False):  # this run connected to Ray
+        if connected_ray:
             import ray
 
             ray.shutdown()
@@ -327,10 +331,8 @@ def _ray_collector(config: MAPPOConfig, actor: Any, kwargs: dict[str, Any], seed
     own batched environment, synchronised so that every batch comes from the current policy."""
     from torchrl.collectors import Collector
 
-    from marl_cover.agents.distributed.executor import ray_init
-
     c = config.collector
-    started = ray_init(c.ray, c.workers)
+    ray_init(c.ray, c.workers)  # (already connected when train_mappo runs it)
     options = {
         "remote_configs": {"num_cpus": 1, "memory": 2 * 1024**3},
         "collector_kwargs": {"auto_register_policy_transforms": False},
@@ -346,7 +348,6 @@ def _ray_collector(config: MAPPOConfig, actor: Any, kwargs: dict[str, Any], seed
     )
     collector.set_seed(seed)
     collector.update_policy_weights_()  # the remote collectors start from the learner's weights
-    collector.disconnect_ray = started  # train_mappo disconnects after shutdown() if so
     return collector
 
 
