@@ -1,10 +1,15 @@
-"""A compiled kernel for :func:`marl_cover.ego.build_ego_graphs` (optional: needs numba).
+"""Compiled kernels for :mod:`marl_cover.ego` (optional: need numba).
 
-It fills the same arrays, in the same order, as the numpy implementation, which stays the
-reference (``tests/test_ego.py`` checks that both agree). One breadth-first search per robot
-over the neighbour table replaces the batched ``dijkstra`` and the dense ``(R, N)`` masks; on
-these machines the whole observation build becomes several times faster (see
-``scripts/bench_env.py``).
+:func:`fill_ego_graphs` fills the same padded arrays, in the same order, as the numpy
+implementation, which stays the reference (``tests/test_ego.py`` checks that both agree);
+:func:`fill_compact` writes the same ego-graphs without padding, one after the other, into
+step-wide tables (:mod:`marl_cover.compact`).
+
+Each robot's ego-graph costs one breadth-first search over the neighbour table, bounded by its
+ball, and the other robots in it are read from an occupancy table (the robot on each
+waypoint), so the work is linear in the team size and independent of the map's size: the
+search state (:class:`marl_cover.ego.EgoScratch`) is kept between calls and restored after
+each robot.
 """
 
 from __future__ import annotations
@@ -14,6 +19,8 @@ import numpy as np
 
 _ACTIONS = 5
 _EGO_EDGES = 2 * _ACTIONS
+#: Status codes of the kernels.
+OK, TOO_MANY_NODES, TOO_MANY_EDGES = 0, -1, -2
 
 
 @numba.njit(cache=True, nogil=True)
@@ -27,6 +34,102 @@ def _slot_length(lengths: np.ndarray, node: int, slot: int) -> float:
 
 
 @numba.njit(cache=True, nogil=True)
+def _ball(
+    neighbors: np.ndarray,
+    start: int,
+    hops: int,
+    dist: np.ndarray,
+    queue: np.ndarray,
+    ball: np.ndarray,
+    row_of: np.ndarray,
+    row_lo: np.ndarray,
+    row_hi: np.ndarray,
+) -> int:
+    """Breadth-first search to ``hops`` hops of ``start``: sets ``dist`` of the ball's waypoints
+    and writes them to ``ball[:size]`` in increasing index; returns ``size``.
+
+    With a row table (``row_of``, see :class:`marl_cover.ego.EgoScratch`; empty otherwise) the
+    ball is read in index order row by row, from the lowest to the highest index the search met
+    on each of its ``2 hops + 1`` rows (``row_lo``, ``row_hi``); without, it is sorted.
+    """
+    rows = row_of.shape[0] > 0
+    if rows:
+        row_lo[:] = dist.shape[0]
+        row_hi[:] = -1
+        base = row_of[start] - hops
+    dist[start] = 0
+    queue[0] = start
+    head, tail = 0, 1
+    while head < tail:
+        u = queue[head]
+        head += 1
+        if rows:
+            r = row_of[u] - base
+            row_lo[r] = min(row_lo[r], u)
+            row_hi[r] = max(row_hi[r], u)
+        if dist[u] >= hops:
+            continue
+        for s in range(4):
+            v = neighbors[u, s]
+            if v >= 0 and dist[v] < 0:
+                dist[v] = dist[u] + 1
+                queue[tail] = v
+                tail += 1
+    if not rows:
+        ball[:tail] = queue[:tail]
+        ball[:tail].sort()
+        return tail
+    size = 0
+    for r in range(row_lo.shape[0]):
+        for u in range(row_lo[r], row_hi[r] + 1):
+            if dist[u] >= 0:
+                ball[size] = u
+                size += 1
+    return size
+
+
+@numba.njit(cache=True, nogil=True)
+def _others(
+    ball: np.ndarray,
+    robot_at: np.ndarray,
+    next_robot: np.ndarray,
+    ego: int,
+    hops: int,
+    out: np.ndarray,
+) -> int:
+    """The robots other than ``ego`` standing on the waypoints ``ball``, in robot order, into
+    ``out``; returns their count (none below two hops: robot -> waypoint -> robot)."""
+    count = 0
+    if hops < 2:
+        return 0
+    for k in range(ball.shape[0]):
+        j = robot_at[ball[k]]
+        while j >= 0:
+            if j != ego:
+                out[count] = j
+                count += 1
+            j = next_robot[j]
+    out[:count].sort()
+    return count
+
+
+@numba.njit(cache=True, nogil=True)
+def _place(robot_node: np.ndarray, robot_at: np.ndarray, next_robot: np.ndarray) -> None:
+    """Writes the occupancy table: ``robot_at`` holds the first robot on each waypoint and
+    ``next_robot`` chains the others on it (a view may show two robots on one waypoint)."""
+    for j in range(robot_node.shape[0] - 1, -1, -1):
+        next_robot[j] = robot_at[robot_node[j]]
+        robot_at[robot_node[j]] = j
+
+
+@numba.njit(cache=True, nogil=True)
+def _clear(robot_node: np.ndarray, robot_at: np.ndarray) -> None:
+    """Restores the occupancy table to ``-1``."""
+    for j in range(robot_node.shape[0]):
+        robot_at[robot_node[j]] = -1
+
+
+@numba.njit(cache=True, nogil=True)
 def fill_ego_graphs(  # noqa: PLR0913, PLR0912, PLR0915 (one flat kernel)
     neighbors: np.ndarray,  # (N, 4) int64
     lengths: np.ndarray,  # (N, 4) float32
@@ -34,6 +137,12 @@ def fill_ego_graphs(  # noqa: PLR0913, PLR0912, PLR0915 (one flat kernel)
     features: np.ndarray,  # (N, 4) float32
     robot_node: np.ndarray,  # (R,) int64
     hops: int,
+    dist: np.ndarray,  # marl_cover.ego.EgoScratch
+    local: np.ndarray,
+    queue: np.ndarray,
+    ball_buffer: np.ndarray,
+    robot_at: np.ndarray,
+    row_of: np.ndarray,
     nodes: np.ndarray,  # (R, M, 4) float32, zeros
     node_pos: np.ndarray,  # (R, M, 2) float32, zeros
     node_mask: np.ndarray,  # (R, M) bool, False
@@ -42,101 +151,221 @@ def fill_ego_graphs(  # noqa: PLR0913, PLR0912, PLR0915 (one flat kernel)
     edge_mask: np.ndarray,  # (R, E) bool, False
     action_mask: np.ndarray,  # (R, 5) int8, zeros
 ) -> int:
-    """Fills the pre-initialised arrays; returns 0, or -1 (too many nodes) / -2 (edges)."""
-    num_nodes = neighbors.shape[0]
+    """Fills the pre-initialised padded arrays; returns ``OK`` or a status of too many nodes
+    or edges."""
     num_robots = robot_node.shape[0]
     sink = nodes.shape[1] - 1
     max_edges = edge_attr.shape[1]
-    dist = np.full(num_nodes, -1, np.int64)
-    local = np.zeros(num_nodes, np.int64)
-    queue = np.empty(num_nodes, np.int64)
+    others = np.empty(num_robots, np.int64)
     robot_local = np.empty(num_robots, np.int64)
+    next_robot = np.empty(num_robots, np.int64)
+    row_lo = np.empty(2 * hops + 1, np.int64)
+    row_hi = np.empty(2 * hops + 1, np.int64)
+    _place(robot_node, robot_at, next_robot)
+    status = OK
     for i in range(num_robots):
         p = robot_node[i]
-        dist[p] = 0
-        queue[0] = p
-        head, tail = 0, 1
-        while head < tail:
-            u = queue[head]
-            head += 1
-            if dist[u] >= hops:
-                continue
-            for s in range(4):
-                v = neighbors[u, s]
-                if v >= 0 and dist[v] < 0:
-                    dist[v] = dist[u] + 1
-                    queue[tail] = v
-                    tail += 1
-        ball = np.sort(queue[:tail])
-        nodes[i, 0, 0] = 1.0
-        for k in range(tail):
-            w = ball[k]
-            local[w] = k + 1
-            for f in range(4):
-                nodes[i, k + 1, f] = features[w, f]
-            node_pos[i, k + 1, 0] = cells[w, 0] - cells[p, 0]
-            node_pos[i, k + 1, 1] = cells[w, 1] - cells[p, 1]
-        count = tail + 1
-        for j in range(num_robots):
-            robot_local[j] = -1
-            q = robot_node[j]
-            if j != i and hops >= 2 and dist[q] >= 0:
-                if count >= sink:
-                    return -1
-                robot_local[j] = count
-                nodes[i, count, 0] = 1.0
-                node_pos[i, count, 0] = cells[q, 0] - cells[p, 0]
-                node_pos[i, count, 1] = cells[q, 1] - cells[p, 1]
-                count += 1
+        tail = _ball(neighbors, p, hops, dist, queue, ball_buffer, row_of, row_lo, row_hi)
+        ball = ball_buffer[:tail]
+        num_others = _others(ball, robot_at, next_robot, i, hops, others)
+        count = 1 + tail + num_others
         if count > sink:
-            return -1
-        for k in range(count):
-            node_mask[i, k] = True
-        for k in range(_ACTIONS):
-            t = _slot_target(neighbors, p, k)
-            if t >= 0:
-                length = _slot_length(lengths, p, k)
-                action_mask[i, k] = 1
-                edge_index[i, 0, k] = local[t]
-                edge_index[i, 1, k] = 0
-                edge_index[i, 0, _ACTIONS + k] = 0
-                edge_index[i, 1, _ACTIONS + k] = local[t]
-                edge_attr[i, k, 0] = length
-                edge_attr[i, _ACTIONS + k, 0] = length
-                edge_mask[i, k] = True
-                edge_mask[i, _ACTIONS + k] = True
-        c = _EGO_EDGES
-        for k in range(tail):
-            u = ball[k]
-            for s in range(4):
-                v = neighbors[u, s]
-                if v >= 0 and dist[v] >= 0:
-                    if c >= max_edges:
-                        return -2
-                    edge_index[i, 0, c] = k + 1
-                    edge_index[i, 1, c] = local[v]
-                    edge_attr[i, c, 0] = lengths[u, s]
-                    edge_mask[i, c] = True
-                    c += 1
-        for j in range(num_robots):
-            if robot_local[j] < 0:
-                continue
-            q = robot_node[j]
+            status = TOO_MANY_NODES
+        else:
+            nodes[i, 0, 0] = 1.0
+            for k in range(tail):
+                w = ball[k]
+                local[w] = k + 1
+                for f in range(4):
+                    nodes[i, k + 1, f] = features[w, f]
+                node_pos[i, k + 1, 0] = cells[w, 0] - cells[p, 0]
+                node_pos[i, k + 1, 1] = cells[w, 1] - cells[p, 1]
+            for k in range(num_others):
+                q = robot_node[others[k]]
+                robot_local[k] = 1 + tail + k
+                nodes[i, 1 + tail + k, 0] = 1.0
+                node_pos[i, 1 + tail + k, 0] = cells[q, 0] - cells[p, 0]
+                node_pos[i, 1 + tail + k, 1] = cells[q, 1] - cells[p, 1]
+            for k in range(count):
+                node_mask[i, k] = True
             for k in range(_ACTIONS):
-                t = _slot_target(neighbors, q, k)
-                if t >= 0 and dist[t] >= 0:
-                    if c + 1 >= max_edges:
-                        return -2
-                    length = _slot_length(lengths, q, k)
-                    edge_index[i, 0, c] = local[t]
-                    edge_index[i, 1, c] = robot_local[j]
-                    edge_index[i, 0, c + 1] = robot_local[j]
-                    edge_index[i, 1, c + 1] = local[t]
-                    edge_attr[i, c, 0] = length
-                    edge_attr[i, c + 1, 0] = length
-                    edge_mask[i, c] = True
-                    edge_mask[i, c + 1] = True
-                    c += 2
+                t = _slot_target(neighbors, p, k)
+                if t >= 0:
+                    length = _slot_length(lengths, p, k)
+                    action_mask[i, k] = 1
+                    edge_index[i, 0, k] = local[t]
+                    edge_index[i, 1, k] = 0
+                    edge_index[i, 0, _ACTIONS + k] = 0
+                    edge_index[i, 1, _ACTIONS + k] = local[t]
+                    edge_attr[i, k, 0] = length
+                    edge_attr[i, _ACTIONS + k, 0] = length
+                    edge_mask[i, k] = True
+                    edge_mask[i, _ACTIONS + k] = True
+            c = _EGO_EDGES
+            for k in range(tail):
+                u = ball[k]
+                for s in range(4):
+                    v = neighbors[u, s]
+                    if v >= 0 and dist[v] >= 0:
+                        if c >= max_edges:
+                            status = TOO_MANY_EDGES
+                            break
+                        edge_index[i, 0, c] = k + 1
+                        edge_index[i, 1, c] = local[v]
+                        edge_attr[i, c, 0] = lengths[u, s]
+                        edge_mask[i, c] = True
+                        c += 1
+            for k in range(num_others):
+                q = robot_node[others[k]]
+                for slot in range(_ACTIONS):
+                    t = _slot_target(neighbors, q, slot)
+                    if t >= 0 and dist[t] >= 0:
+                        if c + 1 >= max_edges:
+                            status = TOO_MANY_EDGES
+                            break
+                        length = _slot_length(lengths, q, slot)
+                        edge_index[i, 0, c] = local[t]
+                        edge_index[i, 1, c] = robot_local[k]
+                        edge_index[i, 0, c + 1] = robot_local[k]
+                        edge_index[i, 1, c + 1] = local[t]
+                        edge_attr[i, c, 0] = length
+                        edge_attr[i, c + 1, 0] = length
+                        edge_mask[i, c] = True
+                        edge_mask[i, c + 1] = True
+                        c += 2
         for k in range(tail):
-            dist[queue[k]] = -1
-    return 0
+            dist[ball[k]] = -1
+        if status != OK:
+            break
+    _clear(robot_node, robot_at)
+    return status
+
+
+@numba.njit(cache=True, nogil=True)
+def fill_compact(  # noqa: PLR0913, PLR0912, PLR0915 (one flat kernel)
+    neighbors: np.ndarray,  # (N, 4) int64
+    lengths: np.ndarray,  # (N, 4) float32
+    cells: np.ndarray,  # (N, 2) float32
+    features: np.ndarray,  # (N, 4) float32
+    robot_node: np.ndarray,  # (R,) int64
+    hops: int,
+    dist: np.ndarray,  # marl_cover.ego.EgoScratch
+    local: np.ndarray,
+    queue: np.ndarray,
+    ball_buffer: np.ndarray,
+    robot_at: np.ndarray,
+    row_of: np.ndarray,
+    node_offsets: np.ndarray,  # (R + 1,) int64, out
+    nodes: np.ndarray,  # (capacity_nodes, 6) float32, out
+    edge_offsets: np.ndarray,  # (R + 1,) int64, out
+    edge_links: np.ndarray,  # (capacity_edges, 2) int64, out
+    edge_attr: np.ndarray,  # (capacity_edges, 1) float32, out
+    action_mask: np.ndarray,  # (R, 5) int8, out
+) -> int:
+    """Writes every robot's ego-graph, unpadded, one after the other (the layout of
+    :class:`marl_cover.compact.CompactObservations`); returns ``OK`` or a status of too many
+    nodes or edges for the tables' capacity (the caller retries with larger tables)."""
+    num_robots = robot_node.shape[0]
+    node_capacity = nodes.shape[0]
+    edge_capacity = edge_attr.shape[0]
+    others = np.empty(num_robots, np.int64)
+    next_robot = np.empty(num_robots, np.int64)
+    row_lo = np.empty(2 * hops + 1, np.int64)
+    row_hi = np.empty(2 * hops + 1, np.int64)
+    _place(robot_node, robot_at, next_robot)
+    status = OK
+    n0, e0 = 0, 0
+    node_offsets[0], edge_offsets[0] = 0, 0
+    for i in range(num_robots):
+        p = robot_node[i]
+        tail = _ball(neighbors, p, hops, dist, queue, ball_buffer, row_of, row_lo, row_hi)
+        ball = ball_buffer[:tail]
+        num_others = _others(ball, robot_at, next_robot, i, hops, others)
+        count = 1 + tail + num_others
+        if n0 + count > node_capacity:
+            status = TOO_MANY_NODES
+        else:
+            px, py = cells[p, 0], cells[p, 1]
+            nodes[n0, 0] = 1.0
+            for f in range(1, 6):
+                nodes[n0, f] = 0.0
+            for k in range(tail):
+                w = ball[k]
+                local[w] = k + 1
+                row = n0 + k + 1
+                for f in range(4):
+                    nodes[row, f] = features[w, f]
+                nodes[row, 4] = cells[w, 0] - px
+                nodes[row, 5] = cells[w, 1] - py
+            for k in range(num_others):
+                q = robot_node[others[k]]
+                row = n0 + 1 + tail + k
+                nodes[row, 0] = 1.0
+                nodes[row, 1] = 0.0
+                nodes[row, 2] = 0.0
+                nodes[row, 3] = 0.0
+                nodes[row, 4] = cells[q, 0] - px
+                nodes[row, 5] = cells[q, 1] - py
+            num_actions = 0
+            for k in range(_ACTIONS):
+                action_mask[i, k] = 1 if _slot_target(neighbors, p, k) >= 0 else 0
+                num_actions += action_mask[i, k]
+            c = e0
+            if c + 2 * num_actions > edge_capacity:
+                status = TOO_MANY_EDGES
+            else:
+                for k in range(_ACTIONS):  # action edges: in (target -> ego), then out
+                    t = _slot_target(neighbors, p, k)
+                    if t >= 0:
+                        length = _slot_length(lengths, p, k)
+                        edge_links[c, 0] = local[t]
+                        edge_links[c, 1] = 0
+                        edge_links[c + num_actions, 0] = 0
+                        edge_links[c + num_actions, 1] = local[t]
+                        edge_attr[c, 0] = length
+                        edge_attr[c + num_actions, 0] = length
+                        c += 1
+                c += num_actions
+            for k in range(tail):
+                if status != OK:
+                    break
+                u = ball[k]
+                for s in range(4):
+                    v = neighbors[u, s]
+                    if v >= 0 and dist[v] >= 0:
+                        if c >= edge_capacity:
+                            status = TOO_MANY_EDGES
+                            break
+                        edge_links[c, 0] = k + 1
+                        edge_links[c, 1] = local[v]
+                        edge_attr[c, 0] = lengths[u, s]
+                        c += 1
+            for k in range(num_others):
+                if status != OK:
+                    break
+                q = robot_node[others[k]]
+                rl = 1 + tail + k
+                for slot in range(_ACTIONS):
+                    t = _slot_target(neighbors, q, slot)
+                    if t >= 0 and dist[t] >= 0:
+                        if c + 2 > edge_capacity:
+                            status = TOO_MANY_EDGES
+                            break
+                        length = _slot_length(lengths, q, slot)
+                        edge_links[c, 0] = local[t]
+                        edge_links[c, 1] = rl
+                        edge_links[c + 1, 0] = rl
+                        edge_links[c + 1, 1] = local[t]
+                        edge_attr[c, 0] = length
+                        edge_attr[c + 1, 0] = length
+                        c += 2
+            n0 += count
+            e0 = c
+            node_offsets[i + 1] = n0
+            edge_offsets[i + 1] = e0
+        for k in range(tail):
+            dist[ball[k]] = -1
+        if status != OK:
+            break
+    _clear(robot_node, robot_at)
+    return status

@@ -21,6 +21,10 @@ def is_action(value: Any) -> bool:
     return number.is_integer() and 0 <= number < NUM_ACTIONS
 
 
+#: Action types read without a check per action (``bool`` is not one of them).
+_PLAIN_INTEGERS = {int, np.int64, np.int32, np.int16, np.int8, np.uint8, np.uint16, np.uint32}
+
+
 def read_actions(actions: dict[str, Any], live: Sequence[str], agents: Sequence[str]) -> np.ndarray:
     """The action of each of ``agents`` in order, ``(R,)`` int64.
 
@@ -33,7 +37,8 @@ def read_actions(actions: dict[str, Any], live: Sequence[str], agents: Sequence[
         ValueError: an agent is unknown or missing, or an action is not an integer in
             ``[0, 5)``; the message names the agent.
     """
-    unknown = [a for a in actions if a not in agents]
+    known = set(agents)
+    unknown = [a for a in actions if a not in known]
     if unknown:
         raise ValueError(
             f"actions given for unknown agents {unknown}; the agents are {list(agents)}"
@@ -41,6 +46,15 @@ def read_actions(actions: dict[str, Any], live: Sequence[str], agents: Sequence[
     missing = [a for a in live if a not in actions]
     if missing:
         raise ValueError(f"no action given for {missing}")
+    values = [actions[agent] for agent in agents]
+    if set(map(type, values)) <= _PLAIN_INTEGERS:  # the common case, checked at once
+        try:
+            action = np.array(values, dtype=np.int64)
+        except OverflowError:  # a huge integer: the check below names it
+            pass
+        else:
+            if len(action) == 0 or (action.min() >= 0 and action.max() < NUM_ACTIONS):
+                return action
     action = np.empty(len(agents), dtype=np.int64)
     for i, agent in enumerate(agents):
         value = actions[agent]

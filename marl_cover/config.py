@@ -150,6 +150,12 @@ class EnvSettings:
         min_window_nodes: Smallest window accepted, in waypoints.
         ego_backend: How ego-graphs are built: ``"auto"`` (``"numba"`` if installed, else
             ``"numpy"``), ``"numpy"`` or ``"numba"``; all give identical observations.
+        observation_mode: ``"padded"`` (fixed-shape arrays with masks) or ``"compact"`` (the
+            same ego-graphs unpadded, views into step-wide tables: for large teams; see
+            :mod:`marl_cover.compact`).
+        max_observation_bytes: Refuse, when the environment is made, a configuration whose
+            observations of one step could need more bytes than this (the padded arrays, or
+            the compact tables' worst case); ``None``: no limit.
     """
 
     task: str = "coverage"
@@ -168,6 +174,8 @@ class EnvSettings:
     window_fraction: float | None = None
     min_window_nodes: int = 200
     ego_backend: str = "auto"
+    observation_mode: str = "padded"
+    max_observation_bytes: int | None = 4 * 2**30
 
     def __post_init__(self) -> None:
         if isinstance(self.map, os.PathLike):  # a grid file given as a Path
@@ -209,6 +217,14 @@ class EnvSettings:
             (
                 self.ego_backend in ("auto", "numpy", "numba"),
                 f"ego_backend must be 'auto', 'numpy' or 'numba', got {self.ego_backend!r}",
+            ),
+            (
+                self.observation_mode in ("padded", "compact"),
+                f"observation_mode must be 'padded' or 'compact', got {self.observation_mode!r}",
+            ),
+            (
+                self.max_observation_bytes is None or self.max_observation_bytes > 0,
+                f"max_observation_bytes must be > 0 or null, got {self.max_observation_bytes}",
             ),
         ]
 

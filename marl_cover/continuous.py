@@ -164,6 +164,8 @@ class QuadrotorCoverageEnv(CoverageEnv):
     """
 
     metadata = {**CoverageEnv.metadata, "name": "marl_cover_quadrotor_v0"}
+    #: Robots in flight are shown on their nearest waypoint, which two can share.
+    _DISTINCT_VIEW = False
 
     #: The dynamics, its compiled kernels and the waypoint lookup never change in an episode.
     _FORK_SHARED = (*CoverageEnv._FORK_SHARED, "dynamics", "_kernels", "_locator")

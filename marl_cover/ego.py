@@ -60,19 +60,28 @@ class PaddedShape:
     max_edges: int
 
 
-def ego_shape(max_waypoints: int, num_robots: int, hops: int, lattice: bool) -> PaddedShape:
+def ego_shape(
+    max_waypoints: int, num_robots: int, hops: int, lattice: bool, distinct: bool = True
+) -> PaddedShape:
     """Padded sizes that hold any ego-graph.
+
+    Where robots never share a waypoint (``distinct``), the other robots of an ego-graph stand
+    on its ball's waypoints other than the ego robot's: at most ``ball - 1`` of them whatever
+    the team's size, and the padded sizes stop growing once the team outnumbers the ball.
 
     Args:
         max_waypoints: Most waypoints any map of the environment can have.
         num_robots: Team size.
         hops: Radius of the ego-graph.
         lattice: Whether maps are square lattices (bounds a ball by :func:`lattice_ball_size`).
+        distinct: Whether the observed robots are always on distinct waypoints.
     """
     ball = min(max_waypoints, lattice_ball_size(hops)) if lattice else max_waypoints
+    others = num_robots - 1 if not distinct else min(num_robots - 1, ball - 1)
+    robots = 1 + max(0, others)  # the ego robot and the others
     return PaddedShape(
-        max_nodes=num_robots + ball + 1,
-        max_edges=4 * ball + 2 * NUM_ACTIONS * num_robots,
+        max_nodes=robots + ball + 1,
+        max_edges=4 * ball + 2 * NUM_ACTIONS * robots,
     )
 
 
@@ -154,6 +163,7 @@ def build_ego_graphs(
     shape: PaddedShape,
     backend: str = "numpy",
     neighbors: np.ndarray | None = None,
+    scratch: EgoScratch | None = None,
 ) -> dict[str, np.ndarray]:
     """Every robot's padded ego-graph, batched over robots.
 
@@ -171,6 +181,8 @@ def build_ego_graphs(
             exploration passes the known graph's (:class:`marl_cover.discovery.Discovery`),
             whose undiscovered waypoints are unreachable, so they never enter an ego-graph.
             Every robot's moves must be in it.
+        scratch: The numba kernel's search state for this map (:class:`EgoScratch`), kept
+            between calls by an environment; a fresh one by default.
 
     Returns:
         Freshly allocated arrays with a leading robot axis: ``nodes (R, M, 4)``,
@@ -179,7 +191,9 @@ def build_ego_graphs(
         ``action_mask (R, 5)`` int8.
     """
     if backend == "numba":
-        return _build_ego_graphs_numba(graph, robot_node, waypoint_features, hops, shape, neighbors)
+        return _build_ego_graphs_numba(
+            graph, robot_node, waypoint_features, hops, shape, neighbors, scratch
+        )
     if neighbors is not None:  # the known graph as a graph of its own (same waypoint ids)
         graph = SpatialGraph(graph.positions, neighbors, graph.cell_size)
     # Rows of features and positions move as single complex numbers (one 16- or 8-byte item),
@@ -300,6 +314,54 @@ def build_ego_graphs(
     }
 
 
+def row_table(graph: SpatialGraph) -> np.ndarray | None:
+    """The row of each waypoint, ``(N,)`` int64, when ``graph``'s waypoints are numbered row by
+    row (rows of equal ``y``, in either direction) and every edge joins the same or adjacent
+    rows, as on maps built from grids; ``None`` otherwise. With it, the compiled kernels read a
+    ball in index order row by row instead of sorting it."""
+    y = graph.positions[:, 1]
+    step = np.diff(y)
+    if not (np.all(step >= 0) or np.all(step <= 0)):
+        return None
+    row = np.zeros(graph.num_nodes, dtype=np.int64)
+    np.cumsum(step != 0, out=row[1:])
+    u, slot = np.nonzero(graph.neighbors >= 0)
+    if np.any(np.abs(row[graph.neighbors[u, slot]] - row[u]) > 1):
+        return None
+    return row
+
+
+class EgoScratch:
+    """Search state of one map's compiled kernels, kept between calls: ``(N,)`` int64 arrays
+    returned to their initial values after each call (``dist`` and ``robot_at`` are ``-1``;
+    the others hold anything), and the map's :func:`row_table` (empty without one)."""
+
+    def __init__(self, graph: SpatialGraph) -> None:
+        n = graph.num_nodes
+        self.num_nodes = n
+        self.dist = np.full(n, -1, np.int64)  # hops from the ego waypoint, -1 outside the ball
+        self.local = np.zeros(n, np.int64)  # local id of a ball waypoint
+        self.queue = np.empty(n, np.int64)  # the search's queue
+        self.ball = np.empty(n, np.int64)  # the ball in index order
+        self.robot_at = np.full(n, -1, np.int64)  # robot on each waypoint, -1 if none
+        rows = row_table(graph)
+        self.row_of = np.zeros(0, np.int64) if rows is None else rows
+
+    def arrays(self) -> tuple[np.ndarray, ...]:
+        """The kernels' scratch arguments, in their order."""
+        return self.dist, self.local, self.queue, self.ball, self.robot_at, self.row_of
+
+
+def _scratch_arrays(scratch: EgoScratch | None, graph: SpatialGraph) -> tuple[np.ndarray, ...]:
+    """The kernels' scratch arguments, from ``scratch`` or a fresh one."""
+    scratch = scratch or EgoScratch(graph)
+    if scratch.num_nodes != graph.num_nodes:
+        raise ValueError(
+            f"the scratch was made for {scratch.num_nodes} waypoints, the map has {graph.num_nodes}"
+        )
+    return scratch.arrays()
+
+
 def _build_ego_graphs_numba(
     graph: SpatialGraph,
     robot_node: np.ndarray,
@@ -307,8 +369,9 @@ def _build_ego_graphs_numba(
     hops: int,
     shape: PaddedShape,
     neighbors: np.ndarray | None,
+    scratch: EgoScratch | None,
 ) -> dict[str, np.ndarray]:
-    from marl_cover._ego_numba import fill_ego_graphs
+    from marl_cover._ego_numba import OK, TOO_MANY_NODES, fill_ego_graphs
 
     r, m, e = len(robot_node), shape.max_nodes, shape.max_edges
     out = {
@@ -327,11 +390,12 @@ def _build_ego_graphs_numba(
         np.ascontiguousarray(waypoint_features, dtype=np.float32),
         np.asarray(robot_node, dtype=np.int64),
         hops,
+        *_scratch_arrays(scratch, graph),
         *out.values(),
     )
-    if status == -1:
+    if status == TOO_MANY_NODES:
         raise RuntimeError(f"an ego-graph has more nodes than its padded bound {m - 1}")
-    if status == -2:
+    if status != OK:
         raise RuntimeError(f"an ego-graph has more edges than its padded bound {e}")
     return out
 

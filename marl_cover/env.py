@@ -15,7 +15,9 @@ the random draws of an episode are the same in both tasks.
 ========================  ==================================================================
 Agents                    ``robot_0 ... robot_{num_robots-1}``
 Action space              ``Discrete(5)``: 0 stay, 1 east, 2 north, 3 west, 4 south
-Observation space         ``Dict`` of padded graph arrays (table below)
+Observation space         ``Dict`` of padded graph arrays (table below); with
+                          ``observation_mode="compact"``, the same ego-graph unpadded, as a
+                          ``Dict`` of a ``gymnasium.spaces.Graph`` (:mod:`marl_cover.compact`)
 State space               ``Dict``: the whole (exploration: known) graph in the same encoding,
                           plus ``robot_nodes`` and ``steps_left``
 Reward                    Team reward: points of interest newly visited this step (all robots
@@ -82,13 +84,14 @@ from pettingzoo.utils.conversions import parallel_to_aec
 
 from marl_cover.actions import read_actions
 from marl_cover.collisions import resolve_collisions
+from marl_cover.compact import CompactBuilder, compact_space
 from marl_cover.config import CoverageConfig
 from marl_cover.discovery import Discovery, sensor_footprints
 from marl_cover.ego import (
     NUM_ACTIONS,
+    EgoScratch,
     StateBuilder,
     action_targets,
-    build_ego_graphs,
     ego_shape,
     graph_space,
     resolve_backend,
@@ -97,6 +100,7 @@ from marl_cover.ego import (
 )
 from marl_cover.generator import draw_interest, draw_starts
 from marl_cover.graph import SpatialGraph
+from marl_cover.observing import EpisodeObservations
 from marl_cover.render import EpisodeRendering
 from marl_cover.sources import make_map_source
 from marl_cover.types import CoverageSnapshot, Moves, StepResult
@@ -118,7 +122,7 @@ class _EpisodeDraw:
     discovery: Discovery | None
 
 
-class CoverageEnv(EpisodeRendering, ParallelEnv):
+class CoverageEnv(EpisodeRendering, EpisodeObservations, ParallelEnv):
     """The coverage environment; see the module docstring for its spaces and rules."""
 
     metadata = {
@@ -127,6 +131,10 @@ class CoverageEnv(EpisodeRendering, ParallelEnv):
         "render_fps": 4,
         "is_parallelizable": True,
     }
+
+    #: Whether the robots' observed waypoints are always distinct (the resolver's promise),
+    #: which bounds the robots of an ego-graph by its waypoints (:func:`ego_shape`).
+    _DISTINCT_VIEW = True
 
     #: Attributes that no step changes, shared by :meth:`fork` (the spaces once built).
     _FORK_SHARED: tuple[str, ...] = (
@@ -140,6 +148,8 @@ class CoverageEnv(EpisodeRendering, ParallelEnv):
         "state_space",
         "_ego_shape",
         "_state_shape",
+        "_scratch",
+        "_compact_builder",
     )
 
     def __init__(self, config: CoverageConfig | None = None, **overrides: Any) -> None:
@@ -160,16 +170,23 @@ class CoverageEnv(EpisodeRendering, ParallelEnv):
         self._map_source = make_map_source(base)
         self._ego_backend = resolve_backend(base.ego_backend)
         self._ego_shape = ego_shape(
-            self._map_source.max_waypoints, base.num_robots, base.hops, self._map_source.lattice
+            self._map_source.max_waypoints,
+            base.num_robots,
+            base.hops,
+            self._map_source.lattice,
+            self._DISTINCT_VIEW,
         )
         self._state_shape = state_shape(
             self._map_source.max_waypoints, self._map_source.max_waypoint_edges, base.num_robots
         )
+        self._check_memory()
         self._rng: np.random.Generator | None = None
         self._graph: SpatialGraph | None = None
         self._state_builder: StateBuilder | None = None
         self._footprint: Any = None  # exploration: sensor footprints of self._graph
         self._discovery: Discovery | None = None
+        self._scratch: EgoScratch | None = None  # the ego kernels' search state, per map
+        self._compact_builder: CompactBuilder | None = None  # compact mode, per map
         self._renderer: Any = None
 
     # ------------------------------------------------------------------ spaces
@@ -178,6 +195,8 @@ class CoverageEnv(EpisodeRendering, ParallelEnv):
     def _observation_space(self) -> gymnasium.spaces.Dict:
         action_mask = gymnasium.spaces.Box(0, 1, (NUM_ACTIONS,), np.int8)
         clock = gymnasium.spaces.Box(0, self.config.max_steps, (), np.int64)  # steps_left
+        if self.config.observation_mode == "compact":
+            return compact_space(self.config.max_steps)
         return graph_space(self._ego_shape, {"action_mask": action_mask, "steps_left": clock})
 
     @functools.cached_property
@@ -260,10 +279,17 @@ class CoverageEnv(EpisodeRendering, ParallelEnv):
             self._graph = draw.graph
             self._state_builder = draw.state_builder
             self._footprint = draw.footprint
+            self._scratch = EgoScratch(draw.graph) if self._ego_backend == "numba" else None
+            self._compact_builder = None
+            if self.config.observation_mode == "compact":
+                self._compact_builder = CompactBuilder(
+                    draw.graph, self.config.hops, self._ego_shape, self._ego_backend
+                )
         self._interest = draw.interest
         self._robot_node = draw.robot_node
         self._visited = np.zeros(draw.graph.num_nodes, dtype=bool)
         self._visited[self._robot_node] = True
+        self._interest_left = int(np.count_nonzero(self._interest & ~self._visited))
         self._waypoint_features = waypoint_features(self._interest & ~self._visited)
         self._discovery = draw.discovery
         self._sense()
@@ -395,8 +421,8 @@ class CoverageEnv(EpisodeRendering, ParallelEnv):
         )
 
     def _all_covered(self) -> bool:
-        """Whether every point of interest has been visited."""
-        return not (self._interest & ~self._visited).any()
+        """Whether every point of interest has been visited (a count kept step by step)."""
+        return self._interest_left == 0
 
     def _read_actions(self, actions: dict[str, Any]) -> np.ndarray:
         if not self.agents:
@@ -437,6 +463,7 @@ class CoverageEnv(EpisodeRendering, ParallelEnv):
             fresh &= first
         new_interest = np.zeros(len(node), dtype=np.int64)
         new_interest[robots] = fresh
+        self._interest_left -= int(np.count_nonzero(fresh))
         self._visited[nodes] = True
         self._waypoint_features[nodes, 2] = 0.0
         self._credits += new_interest
@@ -450,40 +477,23 @@ class CoverageEnv(EpisodeRendering, ParallelEnv):
     def _infos(
         self, new_interest: np.ndarray, blocked: np.ndarray, invalid: np.ndarray
     ) -> dict[str, dict[str, Any]]:
+        columns = (
+            new_interest.tolist(),
+            self._credits.tolist(),
+            blocked.tolist(),
+            invalid.tolist(),
+        )
         return {
             agent: {
-                "new_interest": int(new_interest[i]),
-                "total_interest": int(self._credits[i]),
-                "blocked": bool(blocked[i]),
-                "invalid_action": bool(invalid[i]),
+                "new_interest": new,
+                "total_interest": total,
+                "blocked": stopped,
+                "invalid_action": masked,
             }
-            for i, agent in enumerate(self.possible_agents)
+            for agent, new, total, stopped, masked in zip(
+                self.possible_agents, *columns, strict=True
+            )
         }
-
-    def observations(self) -> dict[str, dict[str, np.ndarray]]:
-        """Every robot's observation keyed by agent, as ``reset`` and ``step`` return them
-        (fresh arrays)."""
-        batch = self.observe_batch()
-        return {
-            agent: {key: value[i, ...] for key, value in batch.items()}  # steps_left: 0-d
-            for i, agent in enumerate(self.possible_agents)
-        }
-
-    def observe_batch(self) -> dict[str, np.ndarray]:
-        """Every robot's observation stacked on a leading robot axis (fresh arrays)."""
-        graph = self._episode_map()
-        robot_node, features = self._view()
-        batch = build_ego_graphs(
-            graph,
-            robot_node,
-            features,
-            self.config.hops,
-            self._ego_shape,
-            self._ego_backend,
-            None if self._discovery is None else self._discovery.neighbors,
-        )
-        batch["steps_left"] = np.full(len(self._robot_node), self._steps_left(), dtype=np.int64)
-        return batch
 
     def state(self) -> dict[str, np.ndarray]:
         """The whole graph in the observation encoding (see the module docstring)."""

@@ -101,3 +101,21 @@ def test_bench_gnn_times_one_controller_in_every_mode(tmp_path: Path) -> None:
         assert row["centralized_ms"] > 0
         if row["robots"] == 4:
             assert row["one_robot_ms"] > 0 and row["decentralized_ms"] > 0
+
+
+def test_bench_scale_prints_rows_targets_and_the_pogema_row(tmp_path: Path, monkeypatch) -> None:
+    """Case d (4 robots) with a stand-in for POGEMA's interpreter that is not there: the rows,
+    the targets table and the JSON, and a POGEMA row that says it is absent."""
+    monkeypatch.delenv("MARL_COVER_POGEMA_PYTHON", raising=False)
+    out = tmp_path / "scale.json"
+    args = ["cases=d", "seconds=0.2", "resets=1", f"out={out}"]
+    done = run_cli("bench-scale", *args)
+    assert done.returncode == 0, done.stderr
+    assert "| d: 4 robots, hops 5, compact |" in done.stdout
+    record = json.loads(out.read_text())
+    rows = {row["name"]: row for row in record["rows"]}
+    compact, padded = rows["d: 4 robots, hops 5, compact"], rows["d: 4 robots, hops 5, padded"]
+    assert compact["agent_steps_per_s"] == pytest.approx(4 * compact["steps_per_s"])
+    assert compact["obs_mb"] < padded["obs_mb"]  # the same ego-graphs without the padding
+    assert rows["d: 4 agents, POGEMA, radius 5"]["mode"] == "pogema (absent)"
+    assert "| d: 4 agents, POGEMA, radius 5 | - |" in done.stdout

@@ -474,3 +474,38 @@ def test_the_diffusion_backward_equals_torch_s_own_bit_for_bit() -> None:
     torchs = torch.autograd.grad((plain * weights).sum(), h)[0]
     assert torch.equal(twice, plain)
     assert torch.equal(ours, torchs)
+
+
+@pytest.mark.parametrize(
+    ("kind", "hops", "time_horizon"),
+    [("nonlinear", 4, None), ("linear", 6, None), ("nonlinear", 3, 20)],
+)
+def test_batched_pass_on_compact_tables_equals_the_decentralized_one(
+    kind: str, hops: int, time_horizon: int | None
+) -> None:
+    """One pass over the compact tables of a 60-robot crowd (the team outnumbers a ball) gives
+    each robot the logits of its own padded ego-graph and of the state, within 1e-5."""
+    from marl_cover.agents.models.logits import compact_logits
+    from marl_cover.agents.models.policy import GNNPolicy
+
+    torch.manual_seed(hops)
+    model = AggregationGNN(GNNConfig(kind=kind, hops=hops, time_horizon=time_horizon)).eval()
+    env = marl_cover.parallel_env(
+        num_robots=60, hops=hops, city_size=400, start_density=2, observation_mode="compact"
+    )
+    env.reset(seed=hops)
+    rng = np.random.default_rng(hops)
+    policy = GNNPolicy(model)
+    with torch.inference_mode():
+        for _ in range(3):
+            tables = env.observe_compact()
+            batched = compact_logits(model, tables)
+            padded = {k: torch.as_tensor(v) for k, v in env.observe_batch().items()}
+            decentralized = decentralized_logits(model, padded)
+            central = centralized_logits(model, tensors(env.state()))
+            for other in (decentralized, central):
+                assert torch.equal(torch.isinf(batched), torch.isinf(other))
+                finite = torch.isfinite(other)
+                torch.testing.assert_close(batched[finite], other[finite], atol=1e-5, rtol=0)
+            assert np.array_equal(policy.act_compact(tables), decentralized.argmax(-1).numpy())
+            env.step({a: int(rng.integers(5)) for a in env.agents})

@@ -34,6 +34,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "bench": ("bench_env", "environment throughput: env steps/s and agent-steps/s"),
     "bench-gnn": ("bench_gnn", "GNN controller time per step, beside the paper's"),
     "bench-mission": ("bench_mission", "the mission's real-time factor"),
+    "bench-scale": ("bench_scale", "large teams: 4 to 10,000 robots, POGEMA, the GNN at 1000"),
     "bench-scale-out": ("bench_scale_out", "serial beside 1 and 2 Ray workers: eval, data, MAPPO"),
     "fuzz": ("fuzz", "random maps, teams and bad actions, the env's invariants checked"),
     "fetch-map": ("fetch_map", "download and check the paper's map into the user cache"),

@@ -25,6 +25,8 @@ invariant           what is checked
 ``refusals``        a malformed action dictionary raised ``ValueError`` and changed nothing
 ``replay``          (one case in ``replay_every``) the same seed and actions give the same
                     episode, bit for bit
+``crash``           nothing else raised: any other exception ends the case as a violation
+                    (its type and message)
 ==================  ===========================================================================
 
 A violation is reported with its case; ``marl-cover fuzz seed=S cases=[C]`` plays that case
@@ -54,6 +56,7 @@ INVARIANTS = (
     "obs_space",
     "refusals",
     "replay",
+    "crash",
 )
 
 
@@ -409,6 +412,9 @@ def fuzz(
             report.violations.append(
                 {"case": case, "invariant": violation.invariant, "message": str(violation)}
             )
+        except Exception as error:  # noqa: BLE001 (a crash is what a fuzzer reports)
+            message = f"{type(error).__name__}: {error}"
+            report.violations.append({"case": case, "invariant": "crash", "message": message})
         report.cases += 1
         if progress is not None:
             progress(report.agent_steps - before)

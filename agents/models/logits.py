@@ -5,12 +5,14 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+import numpy as np
 import torch
 
-from marl_cover.ego import NUM_ACTIONS, STAY
+from marl_cover.ego import NUM_ACTIONS, NUM_NODE_FEATURES, STAY
 
 if TYPE_CHECKING:
     from marl_cover.agents.models.gnn import AggregationGNN
+    from marl_cover.compact import CompactObservations
 
 
 def with_time_feature(nodes: torch.Tensor, steps_left: torch.Tensor, horizon: int) -> torch.Tensor:
@@ -95,6 +97,27 @@ def decentralized_logits(model: AggregationGNN, batch: dict[str, torch.Tensor]) 
     batch = {**batch, "nodes": timed_nodes(model, batch)}
     nodes, edge_index, edge_attr, action_edges = flatten_padded(batch)
     return action_logits(model, (nodes, edge_index, edge_attr), action_edges)
+
+
+def compact_logits(
+    model: AggregationGNN, tables: CompactObservations, dtype: torch.dtype = torch.float32
+) -> torch.Tensor:
+    """Action logits ``(R, 5)`` of every robot from its own ego-graph, read from compact
+    step-wide tables (:class:`marl_cover.compact.CompactObservations`) in one pass over their
+    disjoint union: the decentralized controller, without padding (``-inf`` where an action
+    has no edge)."""
+    nodes_np, edge_index_np, edge_attr_np = tables.flat_graph()
+    nodes = torch.from_numpy(np.ascontiguousarray(nodes_np[:, :NUM_NODE_FEATURES])).to(dtype)
+    horizon = model.config.time_horizon
+    if horizon is not None:
+        per_node = np.repeat(tables.steps_left, np.diff(tables.node_offsets))  # (V,)
+        nodes = with_time_feature(nodes, torch.from_numpy(per_node), horizon)
+    graph = (
+        nodes,
+        torch.from_numpy(np.ascontiguousarray(edge_index_np)),
+        torch.from_numpy(edge_attr_np).to(dtype),
+    )
+    return action_logits(model, graph, torch.from_numpy(tables.action_edges()))
 
 
 def centralized_logits(model: AggregationGNN, state: dict[str, torch.Tensor]) -> torch.Tensor:

@@ -1,7 +1,8 @@
 """The GNN as a policy in the evaluation harness (:class:`GNNPolicy`).
 
-Decentralized (each robot on its own ego-graph, :meth:`GNNPolicy.act`) or centralized (one
-pass on ``state()``, :meth:`GNNPolicy.act_state`), greedy (argmax) by default.
+Decentralized (each robot on its own ego-graph: :meth:`GNNPolicy.act` on padded observations,
+:meth:`GNNPolicy.act_compact` on compact tables) or centralized (one pass on ``state()``,
+:meth:`GNNPolicy.act_state`), greedy (argmax) by default.
 """
 
 from __future__ import annotations
@@ -12,7 +13,12 @@ import torch
 from marl_cover.agents.baselines.spread import spread_actions
 from marl_cover.agents.models.actors import GRAPH_KEYS
 from marl_cover.agents.models.gnn import AggregationGNN
-from marl_cover.agents.models.logits import centralized_logits, decentralized_logits
+from marl_cover.agents.models.logits import (
+    centralized_logits,
+    compact_logits,
+    decentralized_logits,
+)
+from marl_cover.compact import CompactObservations
 
 
 class GNNPolicy:
@@ -105,6 +111,17 @@ class GNNPolicy:
             views = [observations[a] for a in observations]
             actions = spread_actions(logits.numpy(), views, self.spread_margin)
         return dict(zip(observations, actions.tolist(), strict=True))
+
+    @torch.inference_mode()
+    def compact_logits(self, tables: CompactObservations) -> torch.Tensor:
+        """Every robot's action logits ``(R, 5)`` from its own ego-graph, read from the
+        compact tables (``env.observe_compact()``): the decentralized logits, batched without
+        padding."""
+        return compact_logits(self.model, tables, self._dtype)
+
+    def act_compact(self, tables: CompactObservations) -> np.ndarray:
+        """Every robot's action ``(R,)`` from the compact tables (decentralized)."""
+        return self._choose(self.compact_logits(tables))
 
     @torch.inference_mode()
     def state_logits(self, state: dict[str, np.ndarray]) -> torch.Tensor:
