@@ -138,7 +138,6 @@ def fill_ego_graphs(  # noqa: PLR0913, PLR0912, PLR0915 (one flat kernel)
     robot_node: np.ndarray,  # (R,) int64
     hops: int,
     dist: np.ndarray,  # marl_cover.ego.EgoScratch
-    local: np.ndarray,
     queue: np.ndarray,
     ball_buffer: np.ndarray,
     robot_at: np.ndarray,
@@ -175,7 +174,7 @@ def fill_ego_graphs(  # noqa: PLR0913, PLR0912, PLR0915 (one flat kernel)
             nodes[i, 0, 0] = 1.0
             for k in range(tail):
                 w = ball[k]
-                local[w] = k + 1
+                dist[w] = k + 1  # from here on, dist holds the local id
                 for f in range(4):
                     nodes[i, k + 1, f] = features[w, f]
                 node_pos[i, k + 1, 0] = cells[w, 0] - cells[p, 0]
@@ -193,10 +192,10 @@ def fill_ego_graphs(  # noqa: PLR0913, PLR0912, PLR0915 (one flat kernel)
                 if t >= 0:
                     length = _slot_length(lengths, p, k)
                     action_mask[i, k] = 1
-                    edge_index[i, 0, k] = local[t]
+                    edge_index[i, 0, k] = dist[t]
                     edge_index[i, 1, k] = 0
                     edge_index[i, 0, _ACTIONS + k] = 0
-                    edge_index[i, 1, _ACTIONS + k] = local[t]
+                    edge_index[i, 1, _ACTIONS + k] = dist[t]
                     edge_attr[i, k, 0] = length
                     edge_attr[i, _ACTIONS + k, 0] = length
                     edge_mask[i, k] = True
@@ -211,7 +210,7 @@ def fill_ego_graphs(  # noqa: PLR0913, PLR0912, PLR0915 (one flat kernel)
                             status = TOO_MANY_EDGES
                             break
                         edge_index[i, 0, c] = k + 1
-                        edge_index[i, 1, c] = local[v]
+                        edge_index[i, 1, c] = dist[v]
                         edge_attr[i, c, 0] = lengths[u, s]
                         edge_mask[i, c] = True
                         c += 1
@@ -224,10 +223,10 @@ def fill_ego_graphs(  # noqa: PLR0913, PLR0912, PLR0915 (one flat kernel)
                             status = TOO_MANY_EDGES
                             break
                         length = _slot_length(lengths, q, slot)
-                        edge_index[i, 0, c] = local[t]
+                        edge_index[i, 0, c] = dist[t]
                         edge_index[i, 1, c] = robot_local[k]
                         edge_index[i, 0, c + 1] = robot_local[k]
-                        edge_index[i, 1, c + 1] = local[t]
+                        edge_index[i, 1, c + 1] = dist[t]
                         edge_attr[i, c, 0] = length
                         edge_attr[i, c + 1, 0] = length
                         edge_mask[i, c] = True
@@ -250,7 +249,6 @@ def fill_compact(  # noqa: PLR0913, PLR0912, PLR0915 (one flat kernel)
     robot_node: np.ndarray,  # (R,) int64
     hops: int,
     dist: np.ndarray,  # marl_cover.ego.EgoScratch
-    local: np.ndarray,
     queue: np.ndarray,
     ball_buffer: np.ndarray,
     robot_at: np.ndarray,
@@ -258,7 +256,7 @@ def fill_compact(  # noqa: PLR0913, PLR0912, PLR0915 (one flat kernel)
     node_offsets: np.ndarray,  # (R + 1,) int64, out
     nodes: np.ndarray,  # (capacity_nodes, 6) float32, out
     edge_offsets: np.ndarray,  # (R + 1,) int64, out
-    edge_links: np.ndarray,  # (capacity_edges, 2) int64, out
+    edge_links: np.ndarray,  # (capacity_edges, 2) int32, out
     edge_attr: np.ndarray,  # (capacity_edges, 1) float32, out
     action_mask: np.ndarray,  # (R, 5) int8, out
 ) -> int:
@@ -291,7 +289,7 @@ def fill_compact(  # noqa: PLR0913, PLR0912, PLR0915 (one flat kernel)
                 nodes[n0, f] = 0.0
             for k in range(tail):
                 w = ball[k]
-                local[w] = k + 1
+                dist[w] = k + 1  # from here on, dist holds the local id
                 row = n0 + k + 1
                 for f in range(4):
                     nodes[row, f] = features[w, f]
@@ -318,10 +316,10 @@ def fill_compact(  # noqa: PLR0913, PLR0912, PLR0915 (one flat kernel)
                     t = _slot_target(neighbors, p, k)
                     if t >= 0:
                         length = _slot_length(lengths, p, k)
-                        edge_links[c, 0] = local[t]
+                        edge_links[c, 0] = dist[t]
                         edge_links[c, 1] = 0
                         edge_links[c + num_actions, 0] = 0
-                        edge_links[c + num_actions, 1] = local[t]
+                        edge_links[c + num_actions, 1] = dist[t]
                         edge_attr[c, 0] = length
                         edge_attr[c + num_actions, 0] = length
                         c += 1
@@ -337,7 +335,7 @@ def fill_compact(  # noqa: PLR0913, PLR0912, PLR0915 (one flat kernel)
                             status = TOO_MANY_EDGES
                             break
                         edge_links[c, 0] = k + 1
-                        edge_links[c, 1] = local[v]
+                        edge_links[c, 1] = dist[v]
                         edge_attr[c, 0] = lengths[u, s]
                         c += 1
             for k in range(num_others):
@@ -352,10 +350,10 @@ def fill_compact(  # noqa: PLR0913, PLR0912, PLR0915 (one flat kernel)
                             status = TOO_MANY_EDGES
                             break
                         length = _slot_length(lengths, q, slot)
-                        edge_links[c, 0] = local[t]
+                        edge_links[c, 0] = dist[t]
                         edge_links[c, 1] = rl
                         edge_links[c + 1, 0] = rl
-                        edge_links[c + 1, 1] = local[t]
+                        edge_links[c + 1, 1] = dist[t]
                         edge_attr[c, 0] = length
                         edge_attr[c + 1, 0] = length
                         c += 2

@@ -12,7 +12,12 @@ Invariant: the returned positions are pairwise distinct whenever the current one
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
+
+if TYPE_CHECKING:
+    from marl_cover.ego import EgoScratch
 
 
 def resolve_collisions(
@@ -70,3 +75,26 @@ def resolve_collisions(
             break
         moving &= ~blocked
     return np.where(moving, targets, current)
+
+
+def resolve_collisions_compiled(
+    current: np.ndarray, targets: np.ndarray, allow_swaps: bool, scratch: EgoScratch
+) -> np.ndarray:
+    """:func:`resolve_collisions` in a compiled kernel, linear in the team (needs numba):
+    ``scratch`` holds the map's occupancy and claim tables (:class:`marl_cover.ego.EgoScratch`).
+
+    Raises:
+        ValueError: two robots share a current waypoint.
+    """
+    from marl_cover._collisions_numba import resolve_compiled
+
+    current = np.ascontiguousarray(current, dtype=np.int64)
+    targets = np.ascontiguousarray(targets, dtype=np.int64)
+    next_node = np.empty(len(current), dtype=np.int64)
+    shared = resolve_compiled(
+        current, targets, allow_swaps, scratch.robot_at, scratch.claim, next_node
+    )
+    if shared >= 0:
+        dup = current[shared]
+        raise ValueError(f"two robots share waypoint {dup}: {np.flatnonzero(current == dup)}")
+    return next_node

@@ -49,9 +49,18 @@ def sensor_footprints(graph: SpatialGraph, sensor_range: float) -> csr_matrix:
 
 def sensed(footprint: csr_matrix, robot_node: np.ndarray) -> np.ndarray:
     """Waypoints sensed by robots on ``robot_node`` ``(R,)``, sorted and unique."""
+    return np.unique(sensed_with_repeats(footprint, robot_node))
+
+
+def sensed_with_repeats(footprint: csr_matrix, robot_node: np.ndarray) -> np.ndarray:
+    """The rows of ``footprint`` of every robot, concatenated (a waypoint sensed by several
+    robots appears as often), gathered without a loop over robots."""
     starts, ends = footprint.indptr[robot_node], footprint.indptr[robot_node + 1]
-    parts = [footprint.indices[s:e] for s, e in zip(starts.tolist(), ends.tolist(), strict=True)]
-    return np.unique(np.concatenate(parts)) if parts else np.zeros(0, dtype=np.int64)
+    counts = ends - starts  # (R,)
+    if counts.sum() == 0:
+        return np.zeros(0, dtype=np.int64)
+    first = np.repeat(starts - np.cumsum(counts) + counts, counts)  # (S,) row start - offset
+    return footprint.indices[first + np.arange(counts.sum())].astype(np.int64, copy=False)
 
 
 def known_neighbors(graph: SpatialGraph, discovered: np.ndarray) -> np.ndarray:
@@ -142,8 +151,8 @@ class Discovery:
             ``(C,)`` the waypoints whose features changed: the newly discovered ones and the
             old ones that left the frontier (sorted, unique).
         """
-        seen = sensed(self.footprint, robot_node)
-        new = seen[~self.discovered[seen]]
+        seen = sensed_with_repeats(self.footprint, robot_node)
+        new = np.unique(seen[~self.discovered[seen]])  # most of what robots sense is known
         if len(new) == 0:
             return new
         graph = self.graph

@@ -332,24 +332,25 @@ def row_table(graph: SpatialGraph) -> np.ndarray | None:
 
 
 class EgoScratch:
-    """Search state of one map's compiled kernels, kept between calls: ``(N,)`` int64 arrays
+    """Search state of one map's compiled kernels, kept between calls: ``(N,)`` int32 arrays
     returned to their initial values after each call (``dist`` and ``robot_at`` are ``-1``;
     the others hold anything), and the map's :func:`row_table` (empty without one)."""
 
     def __init__(self, graph: SpatialGraph) -> None:
         n = graph.num_nodes
         self.num_nodes = n
-        self.dist = np.full(n, -1, np.int64)  # hops from the ego waypoint, -1 outside the ball
-        self.local = np.zeros(n, np.int64)  # local id of a ball waypoint
-        self.queue = np.empty(n, np.int64)  # the search's queue
-        self.ball = np.empty(n, np.int64)  # the ball in index order
-        self.robot_at = np.full(n, -1, np.int64)  # robot on each waypoint, -1 if none
+        # hops from the ego waypoint while searching, then the local id; -1 outside the ball
+        self.dist = np.full(n, -1, np.int32)
+        self.queue = np.empty(n, np.int32)  # the search's queue
+        self.ball = np.empty(n, np.int32)  # the ball in index order
+        self.robot_at = np.full(n, -1, np.int32)  # robot on each waypoint, -1 if none
+        self.claim = np.full(n, -1, np.int32)  # the resolver's claimer of each waypoint
         rows = row_table(graph)
-        self.row_of = np.zeros(0, np.int64) if rows is None else rows
+        self.row_of = np.zeros(0, np.int32) if rows is None else rows.astype(np.int32)
 
     def arrays(self) -> tuple[np.ndarray, ...]:
         """The kernels' scratch arguments, in their order."""
-        return self.dist, self.local, self.queue, self.ball, self.robot_at, self.row_of
+        return self.dist, self.queue, self.ball, self.robot_at, self.row_of
 
 
 def _scratch_arrays(scratch: EgoScratch | None, graph: SpatialGraph) -> tuple[np.ndarray, ...]:

@@ -83,7 +83,7 @@ from pettingzoo import ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec
 
 from marl_cover.actions import read_actions
-from marl_cover.collisions import resolve_collisions
+from marl_cover.collisions import resolve_collisions, resolve_collisions_compiled
 from marl_cover.compact import CompactBuilder, compact_space
 from marl_cover.config import CoverageConfig
 from marl_cover.discovery import Discovery, sensor_footprints
@@ -91,7 +91,6 @@ from marl_cover.ego import (
     NUM_ACTIONS,
     EgoScratch,
     StateBuilder,
-    action_targets,
     ego_shape,
     graph_space,
     resolve_backend,
@@ -385,12 +384,21 @@ class CoverageEnv(EpisodeRendering, EpisodeObservations, ParallelEnv):
         :meth:`observe_batch` and :meth:`state` give the new observations.
         """
         targets, invalid = self._targets(action)  # (R,), (R,)
-        next_node = resolve_collisions(self._robot_node, targets, self.config.allow_swaps)
+        next_node = self._resolve(targets)
         blocked = next_node != targets
         new_interest = self._visit(next_node)  # (R,)
         self._num_steps += 1
         terminated, truncated = self._end_of_step(self._num_steps >= self.config.max_steps)
         return Moves(new_interest, blocked, invalid, terminated, truncated)
+
+    def _resolve(self, targets: np.ndarray) -> np.ndarray:
+        """Each robot's next waypoint from its target ``(R,)``: the priority-index resolver,
+        compiled where the ego kernels are (the same result)."""
+        if self._scratch is not None:
+            return resolve_collisions_compiled(
+                self._robot_node, targets, self.config.allow_swaps, self._scratch
+            )
+        return resolve_collisions(self._robot_node, targets, self.config.allow_swaps)
 
     def _end_of_step(self, out_of_time: bool) -> tuple[bool, bool]:
         """Termination (everything covered) and truncation (``out_of_time`` and not terminated)
@@ -431,8 +439,8 @@ class CoverageEnv(EpisodeRendering, EpisodeObservations, ParallelEnv):
 
     def _targets(self, action: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Target waypoint of each robot, and which actions were masked out (and become stays)."""
-        slots = action_targets(self._episode_map(), self._robot_node)  # (R, 5)
-        target = slots[np.arange(len(action)), action]
+        moves = self._episode_map().neighbors[self._robot_node, np.maximum(action - 1, 0)]
+        target = np.where(action == 0, self._robot_node, moves)  # (R,), -1 where masked out
         invalid = target < 0
         if invalid.any() and self.config.invalid_action == "raise":
             i = int(np.flatnonzero(invalid)[0])
@@ -444,25 +452,30 @@ class CoverageEnv(EpisodeRendering, EpisodeObservations, ParallelEnv):
 
     def _visit(self, next_node: np.ndarray) -> np.ndarray:
         """Moves the robots; returns the points of interest each visited first, ``(R,)``."""
-        new_interest = self._mark_visited(next_node)
+        new_interest = self._mark_visited(next_node, distinct=True)
         self._robot_node = next_node
         self._trails.append(next_node.copy())
         self._sense()
         return new_interest
 
-    def _mark_visited(self, node: np.ndarray) -> np.ndarray:
+    def _mark_visited(self, node: np.ndarray, distinct: bool = False) -> np.ndarray:
         """Marks ``node`` ``(R,)`` visited (``-1``: robot at no waypoint); returns each robot's
         newly visited points of interest ``(R,)``, credited to the lowest-index robot when two
-        reach one at once."""
-        robots = np.flatnonzero(node >= 0)
-        nodes = node[robots]
-        fresh = self._interest[nodes] & ~self._visited[nodes]
-        if len(nodes) > 1:  # several robots at one waypoint: only the first gets the credit
-            first = np.zeros(len(nodes), dtype=bool)
-            first[np.unique(nodes, return_index=True)[1]] = True
-            fresh &= first
-        new_interest = np.zeros(len(node), dtype=np.int64)
-        new_interest[robots] = fresh
+        reach one at once (``distinct``: the waypoints are distinct, as the resolver's are)."""
+        if distinct:
+            nodes = node
+            fresh = self._interest[nodes] & ~self._visited[nodes]
+            new_interest = fresh.astype(np.int64)
+        else:
+            robots = np.flatnonzero(node >= 0)
+            nodes = node[robots]
+            fresh = self._interest[nodes] & ~self._visited[nodes]
+            if len(nodes) > 1:  # several robots at one waypoint: only the first gets the credit
+                first = np.zeros(len(nodes), dtype=bool)
+                first[np.unique(nodes, return_index=True)[1]] = True
+                fresh &= first
+            new_interest = np.zeros(len(node), dtype=np.int64)
+            new_interest[robots] = fresh
         self._interest_left -= int(np.count_nonzero(fresh))
         self._visited[nodes] = True
         self._waypoint_features[nodes, 2] = 0.0

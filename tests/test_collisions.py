@@ -7,7 +7,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from marl_cover.collisions import resolve_collisions
+from marl_cover.collisions import resolve_collisions, resolve_collisions_compiled
+from marl_cover.ego import EgoScratch, numba_available
+from marl_cover.graph import SpatialGraph
 
 CASES = [
     # name, current, targets, allow_swaps, expected next
@@ -36,14 +38,36 @@ CASES = [
     [case[1:] for case in CASES],
     ids=[case[0] for case in CASES],
 )
-def test_cases(current, targets, allow_swaps, expected) -> None:
-    result = resolve_collisions(np.array(current), np.array(targets), allow_swaps)
+@pytest.mark.parametrize("resolver", ["numpy", "compiled"])
+def test_cases(current, targets, allow_swaps, expected, resolver) -> None:
+    resolve = resolver_of(resolver)
+    result = resolve(
+        np.array(current, dtype=np.int64), np.array(targets, dtype=np.int64), allow_swaps
+    )
     assert result.tolist() == expected
 
 
-def test_rejects_shared_start() -> None:
+@pytest.mark.parametrize("resolver", ["numpy", "compiled"])
+def test_rejects_shared_start(resolver) -> None:
     with pytest.raises(ValueError, match="share waypoint 3"):
-        resolve_collisions(np.array([3, 3]), np.array([1, 2]))
+        resolver_of(resolver)(np.array([3, 3]), np.array([1, 2]), True)
+
+
+def resolver_of(name: str):  # noqa: ANN201
+    """The numpy resolver, or the compiled one with fresh tables of 16 waypoints (checked to
+    be left as they were found)."""
+    if name == "numpy":
+        return resolve_collisions
+    pytest.importorskip("numba")
+    scratch = EgoScratch(SpatialGraph.from_edges(np.zeros((16, 2)) + np.arange(16)[:, None], []))
+
+    def resolve(current, targets, allow_swaps):  # noqa: ANN001, ANN202
+        try:
+            return resolve_collisions_compiled(current, targets, allow_swaps, scratch)
+        finally:
+            assert (scratch.robot_at == -1).all() and (scratch.claim == -1).all()
+
+    return resolve
 
 
 @st.composite
@@ -62,6 +86,8 @@ def scenarios(draw):  # noqa: ANN201
 def test_properties(scenario) -> None:
     current, targets, allow_swaps = scenario
     result = resolve_collisions(current, targets, allow_swaps)
+    if numba_available():  # the compiled resolver gives the same moves
+        assert resolver_of("compiled")(current, targets, allow_swaps).tolist() == result.tolist()
     # never two robots on one waypoint
     assert len(np.unique(result)) == len(result)
     # every robot either reaches its target or stays
@@ -75,3 +101,24 @@ def test_properties(scenario) -> None:
         # whoever moves to a waypoint has the lowest index among those that wanted it
         rivals = np.flatnonzero((targets == targets[i]) & (current != targets))
         assert rivals.min() == i
+
+
+@pytest.mark.parametrize("allow_swaps", [True, False])
+def test_compiled_resolver_agrees_on_crowds(allow_swaps: bool) -> None:
+    """Thousands of robots on a few more waypoints: long chains, cycles, contested targets."""
+    pytest.importorskip("numba")
+    rng = np.random.default_rng(int(allow_swaps))
+    scratch = EgoScratch(
+        SpatialGraph.from_edges(np.zeros((3000, 2)) + np.arange(3000)[:, None], [])
+    )
+    for _ in range(20):
+        current = rng.permutation(3000)[:2500].astype(np.int64)
+        targets = np.where(
+            rng.random(2500) < 0.7,
+            current[rng.integers(0, 2500, 2500)],
+            rng.integers(0, 3000, 2500),
+        ).astype(np.int64)
+        expected = resolve_collisions(current, targets, allow_swaps)
+        got = resolve_collisions_compiled(current, targets, allow_swaps, scratch)
+        np.testing.assert_array_equal(got, expected)
+        assert (expected != current).any()

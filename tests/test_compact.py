@@ -231,3 +231,22 @@ def test_a_thousand_robots_for_twenty_steps() -> None:
 
 #: The team reward of the episode above (seed 7).
 GOLDEN_THOUSAND = 1566.0
+
+
+def test_observations_kept_by_the_user_are_never_overwritten() -> None:
+    """The builder reuses the tables of a step whose observations nobody holds any more; the
+    ones a caller keeps stay as they were, whatever the steps after them."""
+    env = marl_cover.parallel_env(num_robots=8, hops=4, city_size=300, observation_mode="compact")
+    obs, _ = env.reset(seed=1)
+    kept = [(obs, {a: [np.copy(x) for x in o["graph"]] for a, o in obs.items()})]
+    rng = np.random.default_rng(1)
+    for step in range(12):
+        obs, *_ = env.step({a: int(rng.integers(5)) for a in env.agents})
+        if step % 4 == 0:
+            kept.append((obs, {a: [np.copy(x) for x in o["graph"]] for a, o in obs.items()}))
+        tables = env.observe_compact()  # dropped at once: its buffers come back to the pool
+        del tables
+    for observations, copies in kept:
+        for agent, arrays in copies.items():
+            for now, then in zip(observations[agent]["graph"], arrays, strict=True):
+                np.testing.assert_array_equal(now, then)

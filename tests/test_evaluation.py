@@ -319,3 +319,25 @@ def test_generalize_names_a_bad_model_file() -> None:
         result = run_cli("generalize", f"model={path}", "robots=[10]")
         assert result.returncode != 0 and message in result.stderr
         assert "Traceback" not in result.stderr
+
+
+def test_generalize_on_cities_sized_by_the_team(tmp_path) -> None:
+    """map=city: cities of waypoints_per_robot waypoints a robot, paired seeds, the table of
+    rewards per robot and ratios, the CSV and the plot; a second run reads the results back."""
+    out = tmp_path / "gen"
+    args = ["map=city", "robots=[3,6]", "episodes=2", "waypoints_per_robot=40", f"out={out}"]
+    done = run_cli("generalize", *args)
+    assert done.returncode == 0, done.stderr
+    rows = (out / "generalize.csv").read_text().splitlines()
+    header = rows[0].split(",")
+    assert header[:3] == ["robots", "waypoints", "episodes"] and len(rows) == 3
+    first = dict(zip(header, rows[1].split(","), strict=True))
+    assert (first["robots"], first["waypoints"], first["episodes"]) == ("3", "120", "2")
+    gnn = json.loads((out / "gnn_R3.json").read_text())
+    greedy = json.loads((out / "greedy_R3.json").read_text())
+    assert float(first["gnn_per_robot"]) == pytest.approx(gnn["mean"] / 3)
+    paired = np.array(gnn["rewards"]) / np.maximum(np.array(greedy["rewards"]), 1)
+    assert float(first["paired_ratio_mean"]) == pytest.approx(paired.mean())
+    assert (out / "generalize.png").exists() and "| 6 | 240 |" in done.stdout
+    again = run_cli("generalize", *args)
+    assert again.returncode == 0 and "done" not in again.stdout  # read back, nothing replayed

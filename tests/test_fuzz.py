@@ -40,6 +40,9 @@ def _share_freely(robot_node, targets, allow_swaps):  # noqa: ANN001, ANN202
 def test_a_planted_bug_is_found_and_reproduced(monkeypatch) -> None:
     env_module = importlib.import_module("marl_cover.env")  # marl_cover.env is the function
     monkeypatch.setattr(env_module, "resolve_collisions", _share_freely)
+    monkeypatch.setattr(  # the compiled resolver, where numba is installed
+        env_module, "resolve_collisions_compiled", lambda c, t, s, _: _share_freely(c, t, s)
+    )
     report = fuzz(3000, seed=0, replay_every=0)
     found = {v["invariant"] for v in report.violations}
     assert "no_sharing" in found and found <= set(INVARIANTS)

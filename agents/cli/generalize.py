@@ -1,17 +1,25 @@
-"""10 to 100 robots on the paper's 5659-waypoint map, GNN beside greedy (the paper's Fig.
-"generalize").
+"""GNN beside greedy as the team grows: 10 to 100 robots on the paper's 5659-waypoint map (the
+paper's Fig. "generalize"), or 10 to 1000 and more on procedural cities sized in proportion.
 
-The GNN was trained with 4 robots on ~228-waypoint windows; here it runs on the paper's large
-map (T = 50, K = the model's receptive field) in one centralized pass per step (the same actions
-as each robot on its own ego-graph, tested). Greedy runs on each robot's ego-graph. Seeds are
-paired across methods. Each (method, team size) result is written to
-``out/<method>_R<robots>.json`` when done, with its setup (task, seeds, the model's SHA-256),
-and read back when present (resumable); a file made under another setup is an error. Prints the
-table beside the paper's numbers and draws ``out/generalize.png``.
+The GNN was trained with 4 robots on ~228-waypoint windows; here it runs (T = 50, K = the
+model's receptive field) in one centralized pass per step over the team's graph (the same
+actions as each robot on its own ego-graph, tested). Greedy (random moves when nothing is in
+reach, as in the paper) runs on each robot's ego-graph on the paper's map, and in one pass over
+the team's graph on cities (the same actions, tested). Seeds are paired across methods.
+
+``map=paper_large`` (the default): the paper's map, the table beside the paper's numbers.
+``map=city``: each episode a new procedural city of ``waypoints_per_robot`` waypoints a robot
+(56.59, the paper's map with 100 robots), compact observations; the table gives the reward per
+robot and the paired ratio, also written to ``out/generalize.csv``.
+
+Each (method, team size) result is written to ``out/<method>_R<robots>.json`` when done, with
+its setup (task, map, seeds, the model's SHA-256), and read back when present (resumable); a
+file made under another setup is an error. Draws ``out/generalize.png``.
 
 Example::
 
     marl-cover generalize robots=[10,100] episodes=20
+    marl-cover generalize map=city robots=[10,100,1000] episodes=10 out=outputs/generalize_city
 """
 
 from __future__ import annotations
@@ -26,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from marl_cover import parallel_env
-from marl_cover.agents.baselines.greedy import GreedyPolicy
+from marl_cover.agents.baselines.greedy import CentralizedGreedyPolicy, GreedyPolicy
 from marl_cover.agents.cli.options import parse
 from marl_cover.agents.evaluation.episodes import evaluate
 from marl_cover.agents.evaluation.paper import paper_numbers
@@ -35,6 +43,7 @@ from marl_cover.agents.io import file_sha256, read_json, read_result, write_text
 from marl_cover.config import TASKS, require
 
 PAPER_METHODS = {"greedy": "greedy", "gnn": "gnn_nonlinear_bc"}
+MAPS = ("paper_large", "city")
 
 
 @dataclass
@@ -47,6 +56,8 @@ class GeneralizeConfig:
     seed: int = 0  # first seed
     model: str | None = None  # a shipped name or a model file (None: the task's default)
     methods: list[str] = field(default_factory=lambda: ["greedy", "gnn"])  # greedy and/or gnn
+    map: str = "paper_large"  # paper_large (the paper's map) or city (sized by the team)
+    waypoints_per_robot: float = 56.59  # map=city: city size a robot
     out: str = "outputs/generalize"  # results, table and plot
     table_only: bool = False  # print the table of the results on disk, run nothing
 
@@ -56,7 +67,20 @@ class GeneralizeConfig:
             (all(r >= 1 for r in self.robots), f"robots must be >= 1, got {self.robots}"),
             (self.episodes >= 1 and self.seed >= 0, "episodes must be >= 1 and seed >= 0"),
             (set(self.methods) <= set(PAPER_METHODS), f"methods: greedy, gnn; {self.methods}"),
+            (self.map in MAPS, f"map must be one of {MAPS}, got {self.map!r}"),
+            (
+                self.waypoints_per_robot >= 1,
+                f"waypoints_per_robot must be >= 1, got {self.waypoints_per_robot}",
+            ),
         )
+
+    def env_kwargs(self, robots: int, hops: int) -> dict[str, Any]:
+        """The environment of a team size."""
+        common = {"num_robots": robots, "hops": hops, "max_steps": 50, "task": self.task}
+        if self.map == "paper_large":
+            return {**common, "map": "paper_large"}
+        size = round(self.waypoints_per_robot * robots)
+        return {**common, "map": "city", "city_size": size, "observation_mode": "compact"}
 
 
 def setup(method: str, robots: int, config: GeneralizeConfig, sha256: str) -> dict[str, Any]:
@@ -68,27 +92,33 @@ def setup(method: str, robots: int, config: GeneralizeConfig, sha256: str) -> di
         "episodes": config.episodes,
         "seed": config.seed,
         "model_sha256": sha256 if method == "gnn" else None,
+        **(
+            {}
+            if config.map == "paper_large"
+            else {"map": "city", "waypoints_per_robot": config.waypoints_per_robot}
+        ),
     }
 
 
 def play(method: str, robots: int, config: GeneralizeConfig, model: Any, sha: str) -> dict:
     """One (method, team size) result over the seeds."""
     hops = model.config.hops
-    env = parallel_env(
-        map="paper_large", num_robots=robots, hops=hops, max_steps=50, task=config.task
-    )
+    env = parallel_env(**config.env_kwargs(robots, hops))
     policy: Any
     if method == "gnn":
         from marl_cover.agents.models.policy import GNNPolicy
 
         policy = GNNPolicy(model, centralized=True)
-    else:
+    elif config.map == "paper_large":
         policy = GreedyPolicy(hops, fallback="random")
+    else:
+        policy = CentralizedGreedyPolicy(hops, fallback="random")
     summary = evaluate(env, policy, range(config.seed, config.seed + config.episodes))
     return {
         "method": method,
         "task": config.task,
         "robots": robots,
+        "waypoints": env.max_waypoints,
         "hops": hops,
         "episodes": config.episodes,
         "seed": config.seed,
@@ -141,6 +171,89 @@ def plot(records: dict, paper: dict, path: Path, task: str) -> None:
     )
 
 
+def scale_rows(records: dict) -> list[dict[str, Any]]:
+    """One row per team size with both methods: rewards, reward per robot, and the ratio of
+    the means with the mean +- SEM of the paired per-seed ratios."""
+    rows = []
+    for robots in sorted({k[1] for k in records}):
+        greedy, gnn = records.get(("greedy", robots)), records.get(("gnn", robots))
+        if not (greedy and gnn) or len(greedy["rewards"]) != len(gnn["rewards"]):
+            continue
+        paired = np.array(gnn["rewards"]) / np.maximum(np.array(greedy["rewards"]), 1)
+        rows.append(
+            {
+                "robots": robots,
+                "waypoints": gnn.get("waypoints"),
+                "episodes": len(paired),
+                "greedy_mean": greedy["mean"],
+                "greedy_sem": greedy["sem"],
+                "gnn_mean": gnn["mean"],
+                "gnn_sem": gnn["sem"],
+                "greedy_per_robot": greedy["mean"] / robots,
+                "gnn_per_robot": gnn["mean"] / robots,
+                "ratio_of_means": gnn["mean"] / greedy["mean"],
+                "paired_ratio_mean": float(paired.mean()),
+                "paired_ratio_sem": float(paired.std(ddof=1) / np.sqrt(len(paired)))
+                if len(paired) > 1
+                else 0.0,
+            }
+        )
+    return rows
+
+
+def scale_table(rows: list[dict[str, Any]], path: Path) -> None:
+    """Prints the rows of :func:`scale_rows` and writes them as CSV."""
+    print("| robots | waypoints | greedy | GNN | greedy / robot | GNN / robot | GNN / greedy |")
+    print("|---|---|---|---|---|---|---|")
+    for r in rows:
+        print(
+            f"| {r['robots']} | {r['waypoints']} | {r['greedy_mean']:.1f} +- {r['greedy_sem']:.1f}"
+            f" | {r['gnn_mean']:.1f} +- {r['gnn_sem']:.1f} | {r['greedy_per_robot']:.2f} | "
+            f"{r['gnn_per_robot']:.2f} | x{r['ratio_of_means']:.3f} (paired "
+            f"{r['paired_ratio_mean']:.3f} +- {r['paired_ratio_sem']:.3f}) |"
+        )
+    if rows:
+        header = list(rows[0])
+        lines = [",".join(header)] + [",".join(str(r[k]) for k in header) for r in rows]
+        write_text_atomic(path, "\n".join(lines) + "\n")
+        print(f"wrote {path}")
+
+
+def scale_plot(rows: list[dict[str, Any]], path: Path, task: str) -> None:
+    """Reward per robot and the GNN / greedy ratio against the team size."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    robots = [r["robots"] for r in rows]
+    fig, (left, right) = plt.subplots(1, 2, figsize=(9, 3.5))
+    for name, label in (("greedy", "greedy"), ("gnn", "GNN")):
+        per_robot = [r[f"{name}_per_robot"] for r in rows]
+        sem = [r[f"{name}_sem"] / r["robots"] for r in rows]
+        left.errorbar(robots, per_robot, yerr=sem, marker="o", capsize=3, label=label)
+    left.set_xscale("log")
+    left.set_xlabel("robots (cities of 56.59 waypoints a robot)")
+    left.set_ylabel("points visited per robot in 50 steps")
+    left.legend()
+    right.errorbar(
+        robots,
+        [r["paired_ratio_mean"] for r in rows],
+        yerr=[r["paired_ratio_sem"] for r in rows],
+        marker="o",
+        capsize=3,
+    )
+    right.axhline(1.0, color="grey", lw=0.8)
+    right.set_xscale("log")
+    right.set_xlabel("robots")
+    right.set_ylabel("GNN / greedy (paired seeds)")
+    fig.suptitle(f"{task.capitalize()}: GNN beside greedy as the team grows (K = 19)")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
 def run(config: GeneralizeConfig) -> None:
     """Plays the missing results, prints the table, draws the plot."""
     import torch
@@ -169,6 +282,13 @@ def run(config: GeneralizeConfig) -> None:
     records = {
         (r["method"], r["robots"]): r for r in (read_json(p) for p in sorted(out.glob("*_R*.json")))
     }
+    if config.map == "city":
+        rows = scale_rows(records)
+        scale_table(rows, out / "generalize.csv")
+        if rows:
+            scale_plot(rows, out / "generalize.png", config.task)
+            print(f"wrote {out / 'generalize.png'}")
+        return
     paper = paper_numbers(f"{config.task}_generalize_5659")
     table(records, paper)
     if records:
