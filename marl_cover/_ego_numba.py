@@ -149,9 +149,10 @@ def fill_ego_graphs(  # noqa: PLR0913, PLR0912, PLR0915 (one flat kernel)
     edge_attr: np.ndarray,  # (R, E, 1) float32, zeros
     edge_mask: np.ndarray,  # (R, E) bool, False
     action_mask: np.ndarray,  # (R, 5) int8, zeros
+    used: np.ndarray,  # (R, 2) int64, out: nodes and edge slots written, per robot
 ) -> int:
-    """Fills the pre-initialised padded arrays; returns ``OK`` or a status of too many nodes
-    or edges."""
+    """Fills the pre-initialised padded arrays (as :func:`clear_padded` leaves them); records
+    the extent written in ``used``; returns ``OK`` or a status of too many nodes or edges."""
     num_robots = robot_node.shape[0]
     sink = nodes.shape[1] - 1
     max_edges = edge_attr.shape[1]
@@ -232,6 +233,8 @@ def fill_ego_graphs(  # noqa: PLR0913, PLR0912, PLR0915 (one flat kernel)
                         edge_mask[i, c] = True
                         edge_mask[i, c + 1] = True
                         c += 2
+            used[i, 0] = count
+            used[i, 1] = c
         for k in range(tail):
             dist[ball[k]] = -1
         if status != OK:
@@ -367,3 +370,34 @@ def fill_compact(  # noqa: PLR0913, PLR0912, PLR0915 (one flat kernel)
             break
     _clear(robot_node, robot_at)
     return status
+
+
+@numba.njit(cache=True, nogil=True)
+def clear_padded(
+    nodes: np.ndarray,
+    node_pos: np.ndarray,
+    node_mask: np.ndarray,
+    edge_index: np.ndarray,
+    edge_attr: np.ndarray,
+    edge_mask: np.ndarray,
+    action_mask: np.ndarray,
+    used: np.ndarray,  # (R, 2) int64: what the last fill wrote, per robot
+) -> None:
+    """Returns padded arrays to their initial state (zeros, the sink, ``False``) where the last
+    :func:`fill_ego_graphs` wrote, so that a set of arrays can be filled again without
+    initialising all of it."""
+    sink = nodes.shape[1] - 1
+    for i in range(used.shape[0]):
+        for k in range(used[i, 0]):
+            for f in range(nodes.shape[2]):
+                nodes[i, k, f] = 0.0
+            node_pos[i, k, 0] = 0.0
+            node_pos[i, k, 1] = 0.0
+            node_mask[i, k] = False
+        for k in range(used[i, 1]):
+            edge_index[i, 0, k] = sink
+            edge_index[i, 1, k] = sink
+            edge_attr[i, k, 0] = 0.0
+            edge_mask[i, k] = False
+        for k in range(action_mask.shape[1]):
+            action_mask[i, k] = 0

@@ -24,8 +24,9 @@ action edges of robot ``r`` at ``5 r + k`` (in) and ``5 R + 5 r + k`` (out).
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from gymnasium import spaces
@@ -331,6 +332,10 @@ def row_table(graph: SpatialGraph) -> np.ndarray | None:
     return row
 
 
+#: Sets of padded arrays a scratch keeps: one in use by the caller, one to fill.
+_PADDED_POOL = 2
+
+
 class EgoScratch:
     """Search state of one map's compiled kernels, kept between calls: ``(N,)`` int32 arrays
     returned to their initial values after each call (``dist`` and ``robot_at`` are ``-1``;
@@ -345,8 +350,34 @@ class EgoScratch:
         self.ball = np.empty(n, np.int32)  # the ball in index order
         self.robot_at = np.full(n, -1, np.int32)  # robot on each waypoint, -1 if none
         self.claim = np.full(n, -1, np.int32)  # the resolver's claimer of each waypoint
+        self._padded: list[tuple[tuple[int, PaddedShape], tuple[np.ndarray, ...], np.ndarray]] = []
         rows = row_table(graph)
         self.row_of = np.zeros(0, np.int32) if rows is None else rows.astype(np.int32)
+
+    def padded_arrays(
+        self, num_robots: int, shape: PaddedShape
+    ) -> tuple[tuple[np.ndarray, ...], np.ndarray]:
+        """Padded arrays to fill, in their initial state, and their ``(R, 2)`` record of what
+        the fill writes: a set of an earlier call that nothing refers to any more (cleared where
+        it was written, :func:`marl_cover._ego_numba.clear_padded`), or a new one. Reusing a set
+        spares initialising all of it and the page faults of fresh memory."""
+        from marl_cover._ego_numba import clear_padded
+
+        key = (num_robots, shape)
+        for entry_key, arrays, used in self._padded:
+            if entry_key == key and all(sys.getrefcount(a) <= 3 for a in arrays):
+                clear_padded(*(*arrays, used))
+                return arrays, used
+        arrays, used = _fresh_padded(num_robots, shape), np.zeros((num_robots, 2), np.int64)
+        kept = [
+            e for e in self._padded if not all(sys.getrefcount(a) <= 3 for a in e[1])
+        ]  # sets still in use are not ours to keep
+        self._padded = [*kept[-(_PADDED_POOL - 1) :], (key, arrays, used)]
+        return arrays, used
+
+    def drop_padded(self, arrays: tuple[np.ndarray, ...]) -> None:
+        """Forgets a set of padded arrays (one whose record of what was written is wrong)."""
+        self._padded = [e for e in self._padded if e[1] is not arrays]
 
     def arrays(self) -> tuple[np.ndarray, ...]:
         """The kernels' scratch arguments, in their order."""
@@ -363,6 +394,32 @@ def _scratch_arrays(scratch: EgoScratch | None, graph: SpatialGraph) -> tuple[np
     return scratch.arrays()
 
 
+#: Keys of the padded arrays, in the compiled kernels' order.
+PADDED_KEYS = (
+    "nodes",
+    "node_pos",
+    "node_mask",
+    "edge_index",
+    "edge_attr",
+    "edge_mask",
+    "action_mask",
+)
+
+
+def _fresh_padded(r: int, shape: PaddedShape) -> tuple[np.ndarray, ...]:
+    """Padded arrays of ``r`` robots in their initial state (zeros, the sink, ``False``)."""
+    m, e = shape.max_nodes, shape.max_edges
+    return (
+        np.zeros((r, m, NUM_NODE_FEATURES), dtype=np.float32),
+        np.zeros((r, m, 2), dtype=np.float32),
+        np.zeros((r, m), dtype=bool),
+        np.full((r, 2, e), m - 1, dtype=np.int64),
+        np.zeros((r, e, 1), dtype=np.float32),
+        np.zeros((r, e), dtype=bool),
+        np.zeros((r, NUM_ACTIONS), dtype=np.int8),
+    )
+
+
 def _build_ego_graphs_numba(
     graph: SpatialGraph,
     robot_node: np.ndarray,
@@ -375,16 +432,11 @@ def _build_ego_graphs_numba(
     from marl_cover._ego_numba import OK, TOO_MANY_NODES, fill_ego_graphs
 
     r, m, e = len(robot_node), shape.max_nodes, shape.max_edges
-    out = {
-        "nodes": np.zeros((r, m, NUM_NODE_FEATURES), dtype=np.float32),
-        "node_pos": np.zeros((r, m, 2), dtype=np.float32),
-        "node_mask": np.zeros((r, m), dtype=bool),
-        "edge_index": np.full((r, 2, e), m - 1, dtype=np.int64),
-        "edge_attr": np.zeros((r, e, 1), dtype=np.float32),
-        "edge_mask": np.zeros((r, e), dtype=bool),
-        "action_mask": np.zeros((r, NUM_ACTIONS), dtype=np.int8),
-    }
-    status = fill_ego_graphs(
+    entry = scratch.padded_arrays(r, shape) if scratch is not None else None
+    arrays, used = (
+        entry if entry is not None else (_fresh_padded(r, shape), np.zeros((r, 2), np.int64))
+    )
+    kernel_arguments: tuple[Any, ...] = (
         graph.neighbors if neighbors is None else neighbors,
         graph.neighbor_distances,
         graph.float_cells,
@@ -392,13 +444,17 @@ def _build_ego_graphs_numba(
         np.asarray(robot_node, dtype=np.int64),
         hops,
         *_scratch_arrays(scratch, graph),
-        *out.values(),
+        *arrays,
+        used,
     )
+    status = fill_ego_graphs(*kernel_arguments)
+    if status != OK and scratch is not None:
+        scratch.drop_padded(arrays)  # partly written: not reused
     if status == TOO_MANY_NODES:
         raise RuntimeError(f"an ego-graph has more nodes than its padded bound {m - 1}")
     if status != OK:
         raise RuntimeError(f"an ego-graph has more edges than its padded bound {e}")
-    return out
+    return dict(zip(PADDED_KEYS, arrays, strict=True))
 
 
 class StateBuilder:

@@ -250,3 +250,28 @@ def test_observations_kept_by_the_user_are_never_overwritten() -> None:
         for agent, arrays in copies.items():
             for now, then in zip(observations[agent]["graph"], arrays, strict=True):
                 np.testing.assert_array_equal(now, then)
+
+
+def test_padded_observations_kept_by_the_user_are_never_overwritten() -> None:
+    """Padded arrays are refilled only when nobody holds them; a refilled set equals a fresh
+    build (the kernel clears exactly what it wrote before)."""
+    pytest.importorskip("numba")
+    env = marl_cover.parallel_env(num_robots=8, hops=4, city_size=300)
+    obs, _ = env.reset(seed=2)
+    kept = [(obs, {a: {k: np.copy(v) for k, v in o.items()} for a, o in obs.items()})]
+    rng = np.random.default_rng(2)
+    for step in range(12):
+        obs, *_ = env.step({a: int(rng.integers(5)) for a in env.agents})
+        if step % 4 == 0:
+            kept.append((obs, {a: {k: np.copy(v) for k, v in o.items()} for a, o in obs.items()}))
+        reused = env.observe_batch()  # from the pool once the step's own set is dropped
+        fresh = build_ego_graphs(
+            env._graph, env.snapshot().robot_node, env._waypoint_features, 4, env.padded_shape
+        )
+        for key, value in fresh.items():
+            np.testing.assert_array_equal(reused[key], value, err_msg=key)
+        del reused
+    for observations, copies in kept:
+        for agent, arrays in copies.items():
+            for key, value in arrays.items():
+                np.testing.assert_array_equal(observations[agent][key], value)
