@@ -326,6 +326,7 @@ def test_generalize_on_cities_sized_by_the_team(tmp_path) -> None:
     rewards per robot and ratios, the CSV and the plot; a second run reads the results back."""
     out = tmp_path / "gen"
     args = ["map=city", "robots=[3,6]", "episodes=2", "waypoints_per_robot=40", f"out={out}"]
+    args.append("methods=[greedy,gnn,reach]")
     done = run_cli("generalize", *args)
     assert done.returncode == 0, done.stderr
     rows = (out / "generalize.csv").read_text().splitlines()
@@ -339,5 +340,9 @@ def test_generalize_on_cities_sized_by_the_team(tmp_path) -> None:
     paired = np.array(gnn["rewards"]) / np.maximum(np.array(greedy["rewards"]), 1)
     assert float(first["paired_ratio_mean"]) == pytest.approx(paired.mean())
     assert (out / "generalize.png").exists() and "| 6 | 240 |" in done.stdout
+    reach = json.loads((out / "reach_R3.json").read_text())["rewards"]  # a bound on any policy
+    for bound, *rewards in zip(reach, greedy["rewards"], gnn["rewards"], strict=True):
+        assert bound >= max(rewards)
+    assert float(first["reach_bound"]) == pytest.approx(np.mean(reach))
     again = run_cli("generalize", *args)
     assert again.returncode == 0 and "done" not in again.stdout  # read back, nothing replayed

@@ -10,7 +10,9 @@ the team's graph on cities (the same actions, tested). Seeds are paired across m
 ``map=paper_large`` (the default): the paper's map, the table beside the paper's numbers.
 ``map=city``: each episode a new procedural city of ``waypoints_per_robot`` waypoints a robot
 (56.59, the paper's map with 100 robots), compact observations; the table gives the reward per
-robot and the paired ratio, also written to ``out/generalize.csv``.
+robot and the paired ratio, also written to ``out/generalize.csv``. ``methods=[...,reach]``
+adds an upper bound on any policy, per seed: the points of interest within 50 hops of a
+robot's start.
 
 Each (method, team size) result is written to ``out/<method>_R<robots>.json`` when done, with
 its setup (task, map, seeds, the model's SHA-256), and read back when present (resumable); a
@@ -43,6 +45,9 @@ from marl_cover.agents.io import file_sha256, read_json, read_result, write_text
 from marl_cover.config import TASKS, require
 
 PAPER_METHODS = {"greedy": "greedy", "gnn": "gnn_nonlinear_bc"}
+#: ``reach``: not a policy but an upper bound on any policy's reward, per seed: the points of
+#: interest within ``max_steps`` hops of a robot's start (:func:`reach_bound`).
+METHODS = (*PAPER_METHODS, "reach")
 MAPS = ("paper_large", "city")
 
 
@@ -55,7 +60,7 @@ class GeneralizeConfig:
     episodes: int = 100  # episodes per team size
     seed: int = 0  # first seed
     model: str | None = None  # a shipped name or a model file (None: the task's default)
-    methods: list[str] = field(default_factory=lambda: ["greedy", "gnn"])  # greedy and/or gnn
+    methods: list[str] = field(default_factory=lambda: ["greedy", "gnn"])  # greedy, gnn, reach
     map: str = "paper_large"  # paper_large (the paper's map) or city (sized by the team)
     waypoints_per_robot: float = 56.59  # map=city: city size a robot
     out: str = "outputs/generalize"  # results, table and plot
@@ -66,7 +71,7 @@ class GeneralizeConfig:
             (self.task in TASKS, f"task must be one of {TASKS}, got {self.task!r}"),
             (all(r >= 1 for r in self.robots), f"robots must be >= 1, got {self.robots}"),
             (self.episodes >= 1 and self.seed >= 0, "episodes must be >= 1 and seed >= 0"),
-            (set(self.methods) <= set(PAPER_METHODS), f"methods: greedy, gnn; {self.methods}"),
+            (set(self.methods) <= set(METHODS), f"methods: {METHODS}; got {self.methods}"),
             (self.map in MAPS, f"map must be one of {MAPS}, got {self.map!r}"),
             (
                 self.waypoints_per_robot >= 1,
@@ -100,10 +105,47 @@ def setup(method: str, robots: int, config: GeneralizeConfig, sha256: str) -> di
     }
 
 
+def reach_bound(env: Any, seed: int) -> float:
+    """The points of interest within ``max_steps`` hops of some robot's start in the episode of
+    ``seed``: no policy visits more (each robot moves one hop a step)."""
+    from scipy.sparse.csgraph import dijkstra
+
+    env.reset(seed=seed)
+    snapshot = env.snapshot()
+    steps = snapshot.max_steps
+    hops = dijkstra(
+        snapshot.graph.adjacency,
+        indices=snapshot.robot_node,
+        unweighted=True,
+        limit=steps,
+        min_only=True,
+    )
+    return float(np.count_nonzero((hops <= steps) & snapshot.interest & ~snapshot.visited))
+
+
 def play(method: str, robots: int, config: GeneralizeConfig, model: Any, sha: str) -> dict:
     """One (method, team size) result over the seeds."""
     hops = model.config.hops
     env = parallel_env(**config.env_kwargs(robots, hops))
+    seeds = range(config.seed, config.seed + config.episodes)
+    if method == "reach":
+        bounds = np.array([reach_bound(env, seed) for seed in seeds])
+        return {
+            "method": method,
+            "task": config.task,
+            "robots": robots,
+            "waypoints": env.max_waypoints,
+            "hops": hops,
+            "episodes": config.episodes,
+            "seed": config.seed,
+            "model": None,
+            "mean": float(bounds.mean()),
+            "std": float(bounds.std(ddof=1)) if len(bounds) > 1 else 0.0,
+            "sem": float(bounds.std(ddof=1) / np.sqrt(len(bounds))) if len(bounds) > 1 else 0.0,
+            "rewards": bounds.tolist(),
+            "controller_ms_per_step": None,
+            "setup": setup(method, robots, config, sha),
+        }
     policy: Any
     if method == "gnn":
         from marl_cover.agents.models.policy import GNNPolicy
@@ -113,7 +155,7 @@ def play(method: str, robots: int, config: GeneralizeConfig, model: Any, sha: st
         policy = GreedyPolicy(hops, fallback="random")
     else:
         policy = CentralizedGreedyPolicy(hops, fallback="random")
-    summary = evaluate(env, policy, range(config.seed, config.seed + config.episodes))
+    summary = evaluate(env, policy, seeds)
     return {
         "method": method,
         "task": config.task,
@@ -180,6 +222,14 @@ def scale_rows(records: dict) -> list[dict[str, Any]]:
         if not (greedy and gnn) or len(greedy["rewards"]) != len(gnn["rewards"]):
             continue
         paired = np.array(gnn["rewards"]) / np.maximum(np.array(greedy["rewards"]), 1)
+        reach = records.get(("reach", robots))
+        bound = {}
+        if reach and len(reach["rewards"]) == len(paired):
+            bound = {
+                "reach_bound": reach["mean"],
+                "gnn_of_bound": gnn["mean"] / reach["mean"],
+                "bound_over_greedy": reach["mean"] / greedy["mean"],
+            }
         rows.append(
             {
                 "robots": robots,
@@ -196,6 +246,7 @@ def scale_rows(records: dict) -> list[dict[str, Any]]:
                 "paired_ratio_sem": float(paired.std(ddof=1) / np.sqrt(len(paired)))
                 if len(paired) > 1
                 else 0.0,
+                **bound,
             }
         )
     return rows
@@ -203,18 +254,27 @@ def scale_rows(records: dict) -> list[dict[str, Any]]:
 
 def scale_table(rows: list[dict[str, Any]], path: Path) -> None:
     """Prints the rows of :func:`scale_rows` and writes them as CSV."""
-    print("| robots | waypoints | greedy | GNN | greedy / robot | GNN / robot | GNN / greedy |")
-    print("|---|---|---|---|---|---|---|")
+    print(
+        "| robots | waypoints | greedy | GNN | greedy / robot | GNN / robot | GNN / greedy "
+        "| reach bound (GNN's share, bound / greedy) |"
+    )
+    print("|---|---|---|---|---|---|---|---|")
     for r in rows:
+        bound = "-"
+        if "reach_bound" in r:
+            bound = (
+                f"{r['reach_bound']:.1f} ({100 * r['gnn_of_bound']:.0f}%, "
+                f"x{r['bound_over_greedy']:.2f})"
+            )
         print(
             f"| {r['robots']} | {r['waypoints']} | {r['greedy_mean']:.1f} +- {r['greedy_sem']:.1f}"
             f" | {r['gnn_mean']:.1f} +- {r['gnn_sem']:.1f} | {r['greedy_per_robot']:.2f} | "
             f"{r['gnn_per_robot']:.2f} | x{r['ratio_of_means']:.3f} (paired "
-            f"{r['paired_ratio_mean']:.3f} +- {r['paired_ratio_sem']:.3f}) |"
+            f"{r['paired_ratio_mean']:.3f} +- {r['paired_ratio_sem']:.3f}) | {bound} |"
         )
     if rows:
-        header = list(rows[0])
-        lines = [",".join(header)] + [",".join(str(r[k]) for k in header) for r in rows]
+        header = list(dict.fromkeys(k for r in rows for k in r))
+        lines = [",".join(header)] + [",".join(str(r.get(k, "")) for k in header) for r in rows]
         write_text_atomic(path, "\n".join(lines) + "\n")
         print(f"wrote {path}")
 
