@@ -46,6 +46,7 @@ from marl_cover.ego import (
     NUM_ACTIONS,
     NUM_EGO_ACTION_EDGES,
     NUM_NODE_FEATURES,
+    PADDED_KEYS,
     EgoScratch,
     PaddedShape,
     build_ego_graphs,
@@ -219,20 +220,7 @@ def padded_to_compact(batch: dict[str, np.ndarray]) -> CompactObservations:
     Raises:
         KeyError: ``batch`` lacks a key of the padded observation, naming it.
     """
-    missing = [
-        k
-        for k in (
-            "nodes",
-            "node_pos",
-            "node_mask",
-            "edge_index",
-            "edge_attr",
-            "edge_mask",
-            "action_mask",
-            "steps_left",
-        )
-        if k not in batch
-    ]
+    missing = [k for k in (*PADDED_KEYS, "steps_left") if k not in batch]
     if missing:
         raise KeyError(f"padded observations need the keys {missing}")
     node_mask, edge_mask = batch["node_mask"].astype(bool), batch["edge_mask"].astype(bool)

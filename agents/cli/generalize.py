@@ -128,20 +128,24 @@ def play(method: str, robots: int, config: GeneralizeConfig, model: Any, sha: st
     hops = model.config.hops
     env = parallel_env(**config.env_kwargs(robots, hops))
     seeds = range(config.seed, config.seed + config.episodes)
+    head = {
+        "method": method,
+        "task": config.task,
+        "robots": robots,
+        "waypoints": env.max_waypoints,
+        "hops": hops,
+        "episodes": config.episodes,
+        "seed": config.seed,
+        "model": config.model if method == "gnn" else None,
+    }
     if method == "reach":
         bounds = np.array([reach_bound(env, seed) for seed in seeds])
+        sem = float(bounds.std(ddof=1) / np.sqrt(len(bounds))) if len(bounds) > 1 else 0.0
         return {
-            "method": method,
-            "task": config.task,
-            "robots": robots,
-            "waypoints": env.max_waypoints,
-            "hops": hops,
-            "episodes": config.episodes,
-            "seed": config.seed,
-            "model": None,
+            **head,
             "mean": float(bounds.mean()),
             "std": float(bounds.std(ddof=1)) if len(bounds) > 1 else 0.0,
-            "sem": float(bounds.std(ddof=1) / np.sqrt(len(bounds))) if len(bounds) > 1 else 0.0,
+            "sem": sem,
             "rewards": bounds.tolist(),
             "controller_ms_per_step": None,
             "setup": setup(method, robots, config, sha),
@@ -157,14 +161,7 @@ def play(method: str, robots: int, config: GeneralizeConfig, model: Any, sha: st
         policy = CentralizedGreedyPolicy(hops, fallback="random")
     summary = evaluate(env, policy, seeds)
     return {
-        "method": method,
-        "task": config.task,
-        "robots": robots,
-        "waypoints": env.max_waypoints,
-        "hops": hops,
-        "episodes": config.episodes,
-        "seed": config.seed,
-        "model": config.model if method == "gnn" else None,
+        **head,
         "mean": summary.mean,
         "std": summary.std,
         "sem": summary.sem,
