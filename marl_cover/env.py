@@ -536,10 +536,9 @@ class CoverageEnv(EpisodeRendering, EpisodeObservations, ParallelEnv):
         """An independent copy of the environment mid-episode, for planners that play futures
         out: the episode's state (positions, visits, clock, generator, discovery) is copied;
         what no step changes (the configuration, the map, the spaces, the state builder) is
-        shared, which makes a fork several times cheaper than a plain ``copy.deepcopy``. Forks
-        share the compiled kernels' search tables too: step the forks of one environment one
-        at a time (in one thread, or one process each). A fork draws with a renderer of its
-        own, made on its first ``render()``."""
+        shared, which makes a fork several times cheaper than a plain ``copy.deepcopy`` (the
+        kernels' search tables too: step one environment's forks one at a time, never in
+        threads). A fork draws with a renderer of its own, made on its first ``render()``."""
         shared = map(self.__dict__.get, self._FORK_SHARED)
         memo: dict[int, Any] = {id(part): part for part in shared if part is not None}
         if self._renderer is not None:
