@@ -126,9 +126,12 @@ class CompactObservations:
 
         The robots share one read-only ``steps_left`` array (the team's clock)."""
         n, e = self.node_offsets.tolist(), self.edge_offsets.tolist()
-        nodes = [self.nodes[a:b] for a, b in zip(n[:-1], n[1:], strict=True)]
-        attr = [self.edge_attr[a:b] for a, b in zip(e[:-1], e[1:], strict=True)]
-        links = [self.edge_links[a:b] for a, b in zip(e[:-1], e[1:], strict=True)]
+        nodes, attr, links = self.nodes, self.edge_attr, self.edge_links
+        new = tuple.__new__  # a GraphInstance without its constructor's overhead
+        graphs = [
+            new(GraphInstance, (nodes[a:b], attr[c:d], links[c:d]))
+            for a, b, c, d in zip(n, n[1:], e, e[1:])  # noqa: B905 (n, e: one longer than R)
+        ]
         clocks = set(self.steps_left.tolist())
         if len(clocks) == 1:
             shared = np.array(clocks.pop(), dtype=np.int64)
@@ -136,15 +139,10 @@ class CompactObservations:
             steps_left = [shared] * self.num_robots
         else:
             steps_left = [self.steps_left[i, ...] for i in range(self.num_robots)]
-        new = tuple.__new__  # a GraphInstance without its constructor's overhead
         return {
-            agent: {
-                "graph": new(GraphInstance, (node_rows, attr_rows, link_rows)),
-                "action_mask": mask,
-                "steps_left": clock,
-            }
-            for agent, node_rows, attr_rows, link_rows, mask, clock in zip(
-                agents, nodes, attr, links, list(self.action_mask), steps_left, strict=True
+            agent: {"graph": graph, "action_mask": mask, "steps_left": clock}
+            for agent, graph, mask, clock in zip(
+                agents, graphs, list(self.action_mask), steps_left, strict=True
             )
         }
 
