@@ -34,7 +34,6 @@ without loss (:meth:`CompactObservations.to_padded`, :func:`padded_to_compact`).
 from __future__ import annotations
 
 import dataclasses
-import sys
 from collections.abc import Sequence
 
 import numpy as np
@@ -50,6 +49,7 @@ from marl_cover.ego import (
     EgoScratch,
     PaddedShape,
     build_ego_graphs,
+    unreferenced,
 )
 from marl_cover.graph import SpatialGraph
 
@@ -259,12 +259,6 @@ def observation_to_padded(observation: dict, shape: PaddedShape) -> dict[str, np
 _POOL_SIZE = 3
 
 
-def _unreferenced(entry: tuple[np.ndarray, ...]) -> bool:
-    """Whether only ``entry`` refers to its arrays (no view of them is alive): CPython's
-    reference counts, the tuple's reference, the loop's and the call's."""
-    return all(sys.getrefcount(array) <= 3 for array in entry)
-
-
 def _offsets(counts: np.ndarray) -> np.ndarray:
     """CSR offsets ``(len(counts) + 1,)`` int64 of ``counts``."""
     offsets = np.zeros(len(counts) + 1, dtype=np.int64)
@@ -284,15 +278,17 @@ class CompactBuilder:
         graph: The map.
         hops: Radius of the ego-graphs.
         shape: The padded bound of one ego-graph (caps the tables' growth).
-        backend: ``"numba"`` or ``"numpy"`` (see :func:`marl_cover.ego.resolve_backend`).
+        scratch: The compiled kernels' search tables of the map (the environment's own), or
+            ``None`` without numba.
     """
 
-    def __init__(self, graph: SpatialGraph, hops: int, shape: PaddedShape, backend: str) -> None:
+    def __init__(
+        self, graph: SpatialGraph, hops: int, shape: PaddedShape, scratch: EgoScratch | None
+    ) -> None:
         self.graph = graph
         self.hops = hops
         self.shape = shape
-        self.backend = backend
-        self._scratch = EgoScratch(graph) if backend == "numba" else None
+        self._scratch = scratch
         self._node_capacity = 0
         self._edge_capacity = 0
         self._pool: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
@@ -303,14 +299,14 @@ class CompactBuilder:
         one spares the operating system's page faults of fresh memory, a tenth of a step."""
         for entry in self._pool:
             large = len(entry[0]) >= self._node_capacity and len(entry[1]) >= self._edge_capacity
-            if large and _unreferenced(entry):
+            if large and unreferenced(entry):
                 return entry
         entry = (
             np.empty((self._node_capacity, len(COMPACT_NODE_COLUMNS)), dtype=np.float32),
             np.empty((self._edge_capacity, 2), dtype=np.int32),
             np.empty((self._edge_capacity, 1), dtype=np.float32),
         )
-        kept = [e for e in self._pool if not _unreferenced(e)]  # still in use: not ours to free
+        kept = [e for e in self._pool if not unreferenced(e)]  # still in use: not ours to free
         self._pool = [*kept[-(_POOL_SIZE - 1) :], entry]
         return entry
 
@@ -324,7 +320,7 @@ class CompactBuilder:
         """Every robot's ego-graph (arguments as :func:`marl_cover.ego.build_ego_graphs`)."""
         num_robots = len(robot_node)
         clock = np.full(num_robots, steps_left, dtype=np.int64)
-        if self.backend != "numba":
+        if self._scratch is None:  # without numba
             batch = build_ego_graphs(
                 self.graph, robot_node, waypoint_features, self.hops, self.shape, "numpy", neighbors
             )
@@ -332,7 +328,6 @@ class CompactBuilder:
         from marl_cover._ego_numba import OK, TOO_MANY_NODES, fill_compact
 
         graph, scratch = self.graph, self._scratch
-        assert scratch is not None
         node_bound = num_robots * (self.shape.max_nodes - 1)
         edge_bound = num_robots * self.shape.max_edges
         if self._node_capacity == 0:  # a first guess: a quarter of the padded bound

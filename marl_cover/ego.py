@@ -336,6 +336,13 @@ def row_table(graph: SpatialGraph) -> np.ndarray | None:
 _PADDED_POOL = 2
 
 
+def unreferenced(arrays: tuple[np.ndarray, ...]) -> bool:
+    """Whether only the tuple ``arrays`` refers to its arrays (no view of them is alive), so
+    they can be filled again: CPython's reference counts, the tuple's reference, the loop's
+    and the call's."""
+    return all(sys.getrefcount(array) <= 3 for array in arrays)
+
+
 class EgoScratch:
     """Search state of one map's compiled kernels, kept between calls: ``(N,)`` int32 arrays
     returned to their initial values after each call (``dist`` and ``robot_at`` are ``-1``;
@@ -365,13 +372,11 @@ class EgoScratch:
 
         key = (num_robots, shape)
         for entry_key, arrays, used in self._padded:
-            if entry_key == key and all(sys.getrefcount(a) <= 3 for a in arrays):
+            if entry_key == key and unreferenced(arrays):
                 clear_padded(*(*arrays, used))
                 return arrays, used
         arrays, used = _fresh_padded(num_robots, shape), np.zeros((num_robots, 2), np.int64)
-        kept = [
-            e for e in self._padded if not all(sys.getrefcount(a) <= 3 for a in e[1])
-        ]  # sets still in use are not ours to keep
+        kept = [e for e in self._padded if not unreferenced(e[1])]  # in use: not ours to keep
         self._padded = [*kept[-(_PADDED_POOL - 1) :], (key, arrays, used)]
         return arrays, used
 

@@ -185,17 +185,17 @@ class CoverageEnv(EpisodeRendering, EpisodeObservations, ParallelEnv):
         self._footprint: Any = None  # exploration: sensor footprints of self._graph
         self._discovery: Discovery | None = None
         self._scratch: EgoScratch | None = None  # the ego kernels' search state, per map
-        self._compact_builder: CompactBuilder | None = None  # compact mode, per map
+        self._compact_builder: CompactBuilder | None = None  # per map, made on first use
         self._renderer: Any = None
 
     # ------------------------------------------------------------------ spaces
     # Built on first use: a planner that makes many small environments never reads them.
     @functools.cached_property
     def _observation_space(self) -> gymnasium.spaces.Dict:
-        action_mask = gymnasium.spaces.Box(0, 1, (NUM_ACTIONS,), np.int8)
-        clock = gymnasium.spaces.Box(0, self.config.max_steps, (), np.int64)  # steps_left
         if self.config.observation_mode == "compact":
             return compact_space(self.config.max_steps)
+        action_mask = gymnasium.spaces.Box(0, 1, (NUM_ACTIONS,), np.int8)
+        clock = gymnasium.spaces.Box(0, self.config.max_steps, (), np.int64)  # steps_left
         return graph_space(self._ego_shape, {"action_mask": action_mask, "steps_left": clock})
 
     @functools.cached_property
@@ -279,11 +279,7 @@ class CoverageEnv(EpisodeRendering, EpisodeObservations, ParallelEnv):
             self._state_builder = draw.state_builder
             self._footprint = draw.footprint
             self._scratch = EgoScratch(draw.graph) if self._ego_backend == "numba" else None
-            self._compact_builder = None
-            if self.config.observation_mode == "compact":
-                self._compact_builder = CompactBuilder(
-                    draw.graph, self.config.hops, self._ego_shape, self._ego_backend
-                )
+            self._compact_builder = None  # made on the map's first observe_compact()
         self._interest = draw.interest
         self._robot_node = draw.robot_node
         self._visited = np.zeros(draw.graph.num_nodes, dtype=bool)

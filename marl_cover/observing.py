@@ -50,8 +50,8 @@ class EpisodeObservations:
         per_robot_fixed = NUM_ACTIONS + 8  # action_mask, steps_left
         if self.config.observation_mode == "padded":
             per_robot = m * (4 * 4 + 2 * 4 + 1) + e * (2 * 8 + 4 + 1) + per_robot_fixed
-        else:  # nodes (6 float32), links (2 int64), lengths (float32), two offsets
-            per_robot = (m - 1) * 6 * 4 + e * (2 * 8 + 4) + 2 * 8 + per_robot_fixed
+        else:  # nodes (6 float32), links (2 int32), lengths (float32), two offsets
+            per_robot = (m - 1) * 6 * 4 + e * (2 * 4 + 4) + 2 * 8 + per_robot_fixed
         return self.config.num_robots * per_robot
 
     def _check_memory(self) -> None:
@@ -89,7 +89,7 @@ class EpisodeObservations:
         graph = self._episode_map()
         if self._compact_builder is None:
             self._compact_builder = CompactBuilder(
-                graph, self.config.hops, self._ego_shape, self._ego_backend
+                graph, self.config.hops, self._ego_shape, self._scratch
             )
         robot_node, features = self._view()
         return self._compact_builder.build(
