@@ -19,7 +19,7 @@ from marl_cover.maps import graph_from_occupancy, load_occupancy, paper_graph, s
 from marl_cover.paper_map import fetch_paper_map
 from marl_cover.registration import ENV_IDS, register_envs
 
-__version__ = "1.2.0"
+__version__ = "1.3.0"
 
 __all__ = [
     "ENV_IDS",

@@ -326,7 +326,7 @@ def test_generalize_on_cities_sized_by_the_team(tmp_path) -> None:
     rewards per robot and ratios, the CSV and the plot; a second run reads the results back."""
     out = tmp_path / "gen"
     args = ["map=city", "robots=[3,6]", "episodes=2", "waypoints_per_robot=40", f"out={out}"]
-    args.append("methods=[greedy,gnn,reach]")
+    args.append("methods=[greedy,gnn,assign,reach,route]")
     done = run_cli("generalize", *args)
     assert done.returncode == 0, done.stderr
     rows = (out / "generalize.csv").read_text().splitlines()
@@ -340,9 +340,16 @@ def test_generalize_on_cities_sized_by_the_team(tmp_path) -> None:
     paired = np.array(gnn["rewards"]) / np.maximum(np.array(greedy["rewards"]), 1)
     assert float(first["paired_ratio_mean"]) == pytest.approx(paired.mean())
     assert (out / "generalize.png").exists() and "| 6 | 240 |" in done.stdout
-    reach = json.loads((out / "reach_R3.json").read_text())["rewards"]  # a bound on any policy
-    for bound, *rewards in zip(reach, greedy["rewards"], gnn["rewards"], strict=True):
-        assert bound >= max(rewards)
+    assign = json.loads((out / "assign_R3.json").read_text())["rewards"]
+    reach = json.loads((out / "reach_R3.json").read_text())["rewards"]  # bounds on any policy
+    route = json.loads((out / "route_R3.json").read_text())["rewards"]
+    for *bounds, a, b, c in zip(
+        reach, route, greedy["rewards"], gnn["rewards"], assign, strict=True
+    ):
+        assert bounds[0] >= bounds[1] >= max(a, b, c)
     assert float(first["reach_bound"]) == pytest.approx(np.mean(reach))
+    assert float(first["route_bound"]) == pytest.approx(np.mean(route))
+    assert float(first["gnn_of_bound"]) == pytest.approx(gnn["mean"] / np.mean(route))
+    assert float(first["assign_mean"]) == pytest.approx(np.mean(assign))
     again = run_cli("generalize", *args)
     assert again.returncode == 0 and "done" not in again.stdout  # read back, nothing replayed

@@ -10,9 +10,11 @@ the team's graph on cities (the same actions, tested). Seeds are paired across m
 ``map=paper_large`` (the default): the paper's map, the table beside the paper's numbers.
 ``map=city``: each episode a new procedural city of ``waypoints_per_robot`` waypoints a robot
 (56.59, the paper's map with 100 robots), compact observations; the table gives the reward per
-robot and the paired ratio, also written to ``out/generalize.csv``. ``methods=[...,reach]``
-adds an upper bound on any policy, per seed: the points of interest within 50 hops of a
-robot's start.
+robot and the paired ratio, also written to ``out/generalize.csv``. ``methods=[...]`` may add
+``assign``, the omniscient assignment planner (robots matched to distinct points of interest
+each step, with the whole map), and upper bounds on any policy, per seed: ``reach`` (the
+points of interest within 50 hops of a robot's start) and ``route`` (also counting the moves
+each robot has: :mod:`marl_cover.agents.evaluation.bounds`).
 
 Each (method, team size) result is written to ``out/<method>_R<robots>.json`` when done, with
 its setup (task, map, seeds, the model's SHA-256), and read back when present (resumable); a
@@ -22,6 +24,8 @@ Example::
 
     marl-cover generalize robots=[10,100] episodes=20
     marl-cover generalize map=city robots=[10,100,1000] episodes=10 out=outputs/generalize_city
+    marl-cover generalize map=city robots=[1000] episodes=10 methods=[assign,route] \
+        out=outputs/generalize_city
 """
 
 from __future__ import annotations
@@ -36,8 +40,10 @@ from typing import Any
 import numpy as np
 
 from marl_cover import parallel_env
+from marl_cover.agents.baselines.assignment import AssignmentPolicy
 from marl_cover.agents.baselines.greedy import CentralizedGreedyPolicy, GreedyPolicy
 from marl_cover.agents.cli.options import parse
+from marl_cover.agents.evaluation.bounds import episode_bound
 from marl_cover.agents.evaluation.episodes import evaluate
 from marl_cover.agents.evaluation.paper import paper_numbers
 from marl_cover.agents.evaluation.plots import plot_beside_paper
@@ -45,9 +51,11 @@ from marl_cover.agents.io import file_sha256, read_json, read_result, write_text
 from marl_cover.config import TASKS, require
 
 PAPER_METHODS = {"greedy": "greedy", "gnn": "gnn_nonlinear_bc"}
-#: ``reach``: not a policy but an upper bound on any policy's reward, per seed: the points of
-#: interest within ``max_steps`` hops of a robot's start (:func:`reach_bound`).
-METHODS = (*PAPER_METHODS, "reach")
+#: ``assign``: the omniscient assignment planner (:class:`AssignmentPolicy`), a centralized
+#: reference with the whole map.
+#: Not policies but upper bounds on any policy's reward, per seed (:mod:`..evaluation.bounds`).
+BOUNDS = ("reach", "route")
+METHODS = (*PAPER_METHODS, "assign", *BOUNDS)
 MAPS = ("paper_large", "city")
 
 
@@ -60,7 +68,9 @@ class GeneralizeConfig:
     episodes: int = 100  # episodes per team size
     seed: int = 0  # first seed
     model: str | None = None  # a shipped name or a model file (None: the task's default)
-    methods: list[str] = field(default_factory=lambda: ["greedy", "gnn"])  # greedy, gnn, reach
+    methods: list[str] = field(
+        default_factory=lambda: ["greedy", "gnn"]
+    )  # greedy, gnn, assign, reach, route
     map: str = "paper_large"  # paper_large (the paper's map) or city (sized by the team)
     waypoints_per_robot: float = 56.59  # map=city: city size a robot
     out: str = "outputs/generalize"  # results, table and plot
@@ -105,24 +115,6 @@ def setup(method: str, robots: int, config: GeneralizeConfig, sha256: str) -> di
     }
 
 
-def reach_bound(env: Any, seed: int) -> float:
-    """The points of interest within ``max_steps`` hops of some robot's start in the episode of
-    ``seed``: no policy visits more (each robot moves one hop a step)."""
-    from scipy.sparse.csgraph import dijkstra
-
-    env.reset(seed=seed)
-    snapshot = env.snapshot()
-    steps = snapshot.max_steps
-    hops = dijkstra(
-        snapshot.graph.adjacency,
-        indices=snapshot.robot_node,
-        unweighted=True,
-        limit=steps,
-        min_only=True,
-    )
-    return float(np.count_nonzero((hops <= steps) & snapshot.interest & ~snapshot.visited))
-
-
 def play(method: str, robots: int, config: GeneralizeConfig, model: Any, sha: str) -> dict:
     """One (method, team size) result over the seeds."""
     hops = model.config.hops
@@ -138,8 +130,8 @@ def play(method: str, robots: int, config: GeneralizeConfig, model: Any, sha: st
         "seed": config.seed,
         "model": config.model if method == "gnn" else None,
     }
-    if method == "reach":
-        bounds = np.array([reach_bound(env, seed) for seed in seeds])
+    if method in BOUNDS:
+        bounds = np.array([episode_bound(env, seed, method) for seed in seeds], dtype=np.float64)
         sem = float(bounds.std(ddof=1) / np.sqrt(len(bounds))) if len(bounds) > 1 else 0.0
         return {
             **head,
@@ -155,6 +147,8 @@ def play(method: str, robots: int, config: GeneralizeConfig, model: Any, sha: st
         from marl_cover.agents.models.policy import GNNPolicy
 
         policy = GNNPolicy(model, centralized=True)
+    elif method == "assign":
+        policy = AssignmentPolicy()
     elif config.map == "paper_large":
         policy = GreedyPolicy(hops, fallback="random")
     else:
@@ -219,14 +213,21 @@ def scale_rows(records: dict) -> list[dict[str, Any]]:
         if not (greedy and gnn) or len(greedy["rewards"]) != len(gnn["rewards"]):
             continue
         paired = np.array(gnn["rewards"]) / np.maximum(np.array(greedy["rewards"]), 1)
-        reach = records.get(("reach", robots))
-        bound = {}
-        if reach and len(reach["rewards"]) == len(paired):
-            bound = {
-                "reach_bound": reach["mean"],
-                "gnn_of_bound": gnn["mean"] / reach["mean"],
-                "bound_over_greedy": reach["mean"] / greedy["mean"],
-            }
+        extra: dict[str, Any] = {}
+        assign = records.get(("assign", robots))
+        if assign and len(assign["rewards"]) == len(paired):
+            ratios = np.array(assign["rewards"]) / np.maximum(np.array(greedy["rewards"]), 1)
+            extra.update(assign_mean=assign["mean"], assign_sem=assign["sem"])
+            extra.update(assign_paired_ratio=float(ratios.mean()))
+        for kind in BOUNDS:  # the tightest last
+            record = records.get((kind, robots))
+            if record and len(record["rewards"]) == len(paired):
+                extra[f"{kind}_bound"] = record["mean"]
+                extra.update(
+                    bound=kind,
+                    gnn_of_bound=gnn["mean"] / record["mean"],
+                    bound_over_greedy=record["mean"] / greedy["mean"],
+                )
         rows.append(
             {
                 "robots": robots,
@@ -243,7 +244,7 @@ def scale_rows(records: dict) -> list[dict[str, Any]]:
                 "paired_ratio_sem": float(paired.std(ddof=1) / np.sqrt(len(paired)))
                 if len(paired) > 1
                 else 0.0,
-                **bound,
+                **extra,
             }
         )
     return rows
@@ -253,21 +254,25 @@ def scale_table(rows: list[dict[str, Any]], path: Path) -> None:
     """Prints the rows of :func:`scale_rows` and writes them as CSV."""
     print(
         "| robots | waypoints | greedy | GNN | greedy / robot | GNN / robot | GNN / greedy "
-        "| reach bound (GNN's share, bound / greedy) |"
+        "| omniscient assignment (/ greedy) | bound (GNN's share, bound / greedy) |"
     )
-    print("|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|")
     for r in rows:
-        bound = "-"
-        if "reach_bound" in r:
+        assign, bound = "-", "-"
+        if "assign_mean" in r:
+            assign = (
+                f"{r['assign_mean']:.1f} +- {r['assign_sem']:.1f} (x{r['assign_paired_ratio']:.3f})"
+            )
+        if "bound" in r:
             bound = (
-                f"{r['reach_bound']:.1f} ({100 * r['gnn_of_bound']:.0f}%, "
+                f"{r['bound']} {r[r['bound'] + '_bound']:.1f} ({100 * r['gnn_of_bound']:.0f}%, "
                 f"x{r['bound_over_greedy']:.2f})"
             )
         print(
             f"| {r['robots']} | {r['waypoints']} | {r['greedy_mean']:.1f} +- {r['greedy_sem']:.1f}"
             f" | {r['gnn_mean']:.1f} +- {r['gnn_sem']:.1f} | {r['greedy_per_robot']:.2f} | "
             f"{r['gnn_per_robot']:.2f} | x{r['ratio_of_means']:.3f} (paired "
-            f"{r['paired_ratio_mean']:.3f} +- {r['paired_ratio_sem']:.3f}) | {bound} |"
+            f"{r['paired_ratio_mean']:.3f} +- {r['paired_ratio_sem']:.3f}) | {assign} | {bound} |"
         )
     if rows:
         header = list(dict.fromkeys(k for r in rows for k in r))
