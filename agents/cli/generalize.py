@@ -206,7 +206,9 @@ def plot(records: dict, paper: dict, path: Path, task: str) -> None:
 
 def scale_rows(records: dict) -> list[dict[str, Any]]:
     """One row per team size with both methods: rewards, reward per robot, and the ratio of
-    the means with the mean +- SEM of the paired per-seed ratios."""
+    the means with the mean +- SEM of the paired per-seed ratios; where they were played, the
+    assignment planner (its paired ratio to greedy) and the bounds (the GNN's share of the
+    tightest, ``route`` over ``reach``)."""
     rows = []
     for robots in sorted({k[1] for k in records}):
         greedy, gnn = records.get(("greedy", robots)), records.get(("gnn", robots))
