@@ -157,7 +157,6 @@ def fill_ego_graphs(  # noqa: PLR0913, PLR0912, PLR0915 (one flat kernel)
     sink = nodes.shape[1] - 1
     max_edges = edge_attr.shape[1]
     others = np.empty(num_robots, np.int64)
-    robot_local = np.empty(num_robots, np.int64)
     next_robot = np.empty(num_robots, np.int64)
     row_lo = np.empty(2 * hops + 1, np.int64)
     row_hi = np.empty(2 * hops + 1, np.int64)
@@ -182,7 +181,6 @@ def fill_ego_graphs(  # noqa: PLR0913, PLR0912, PLR0915 (one flat kernel)
                 node_pos[i, k + 1, 1] = cells[w, 1] - cells[p, 1]
             for k in range(num_others):
                 q = robot_node[others[k]]
-                robot_local[k] = 1 + tail + k
                 nodes[i, 1 + tail + k, 0] = 1.0
                 node_pos[i, 1 + tail + k, 0] = cells[q, 0] - cells[p, 0]
                 node_pos[i, 1 + tail + k, 1] = cells[q, 1] - cells[p, 1]
@@ -217,6 +215,7 @@ def fill_ego_graphs(  # noqa: PLR0913, PLR0912, PLR0915 (one flat kernel)
                         c += 1
             for k in range(num_others):
                 q = robot_node[others[k]]
+                rl = 1 + tail + k  # the robot's local id
                 for slot in range(_ACTIONS):
                     t = _slot_target(neighbors, q, slot)
                     if t >= 0 and dist[t] >= 0:
@@ -225,8 +224,8 @@ def fill_ego_graphs(  # noqa: PLR0913, PLR0912, PLR0915 (one flat kernel)
                             break
                         length = _slot_length(lengths, q, slot)
                         edge_index[i, 0, c] = dist[t]
-                        edge_index[i, 1, c] = robot_local[k]
-                        edge_index[i, 0, c + 1] = robot_local[k]
+                        edge_index[i, 1, c] = rl
+                        edge_index[i, 0, c + 1] = rl
                         edge_index[i, 1, c + 1] = dist[t]
                         edge_attr[i, c, 0] = length
                         edge_attr[i, c + 1, 0] = length

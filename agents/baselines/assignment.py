@@ -72,10 +72,11 @@ class AssignmentPolicy:
         open_interest = snapshot.interest & ~snapshot.visited  # (N,)
         target, first, score = self._candidates(graph.adjacency, robot, open_interest, radius)
         chosen = self._match(target, score)  # (R,) a column of target and first, -1: none
-        action = self._random_moves(graph.neighbors[robot])  # (R,)
+        neighbors = graph.neighbors[robot]  # (R, 4)
+        action = self._random_moves(neighbors)  # (R,)
         matched = np.flatnonzero(chosen >= 0)
         step = first[matched, chosen[matched]]  # (M,) the next waypoint
-        slot = np.argmax(graph.neighbors[robot[matched]] == step[:, None], axis=1)
+        slot = np.argmax(neighbors[matched] == step[:, None], axis=1)
         action[matched] = slot + 1
         return dict(zip(env.possible_agents, action.tolist(), strict=True))
 
@@ -104,11 +105,9 @@ class AssignmentPolicy:
             row, point, score = row[order], point[order], score[order]
             rank = np.arange(len(row)) - np.searchsorted(row, row)  # within the robot's row
             keep = rank < count
-            best = np.full((len(hops), count), -1, dtype=np.int64)  # (c, C)
-            best[row[keep], rank[keep]] = point[keep]
-            target[rows] = best
+            target[start + row[keep], rank[keep]] = point[keep]
             scores[start + row[keep], rank[keep]] = score[keep]
-            first[rows] = _first_steps(parent, robot[rows], best)
+            first[rows] = _first_steps(parent, robot[rows], target[rows])
         return target, first, scores
 
     def _match(self, target: np.ndarray, score: np.ndarray) -> np.ndarray:
